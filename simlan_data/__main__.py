@@ -1,0 +1,5 @@
+"""``python -m simlan_data`` runs the default scenario (same as ``python -m simlan_data.run``)."""
+
+from simlan_data.run import main
+
+main()

@@ -1,0 +1,377 @@
+"""Typed configuration: the schema behind ``conf/`` (Hydra structured configs).
+
+Hydra checks types and unknown keys when it composes; ``__post_init__`` checks ranges, units and
+references when ``OmegaConf.to_object`` builds these dataclasses. Every failure is a
+:class:`~simlan_data.errors.ConfigError` naming the field, the value and the fix.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+from .errors import ConfigError
+
+NAMESPACE_RE = re.compile(r"^robot_agent_(\d+)$")
+STREAMS = ("rgb", "depth", "semantic")
+RGB_ENCODINGS = ("jpeg", "png", "raw")
+DEPTH_ENCODINGS = ("png", "raw")
+SEMANTIC_ENCODINGS = ("png", "raw")
+CHUNK_COMPRESSIONS = ("zstd", "none")
+CALIBRATION_CHECKS = ("warn", "error")
+RENDER_BACKENDS = ("auto", "egl", "tiny")
+FIDELITIES = ("empty", "light", "medium", "default")
+
+
+def _incomplete(obj: Any) -> bool:
+    """True while OmegaConf builds the schema itself (fields still MISSING): skip checks then."""
+    return any(
+        getattr(obj, f) == MISSING for f in obj.__dataclass_fields__ if isinstance(getattr(obj, f), str)
+    )
+
+
+def _bad(field_name: str, value: Any, why: str, fix: str) -> ConfigError:
+    return ConfigError(f"invalid {field_name}={value!r}", "config", why, fix)
+
+
+def _positive(field_name: str, value: float, fix: str) -> None:
+    if not value > 0:
+        raise _bad(field_name, value, "must be > 0", fix)
+
+
+def _choice(field_name: str, value: str, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise _bad(
+            field_name, value, f"expected one of {', '.join(choices)}", f"set {field_name}={choices[0]}"
+        )
+
+
+def _divides(field_name: str, rate_hz: float, physics_hz: int) -> None:
+    steps = physics_hz / rate_hz
+    if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
+        raise _bad(
+            field_name,
+            rate_hz,
+            f"the simulation steps at world.physics_hz={physics_hz}, and {rate_hz} Hz is not a whole number of steps",
+            f"use a rate that divides {physics_hz}, e.g. {physics_hz / max(1, round(steps))}",
+        )
+
+
+@dataclass
+class ObjectPhysicsConfig:
+    """Physics parameters of one class of world objects."""
+
+    mass_kg: float = 0.0
+    lateral_friction: float = 0.8
+    rolling_friction: float = 0.0
+    spinning_friction: float = 0.0
+    restitution: float = 0.0
+    linear_damping: float = 0.04
+    angular_damping: float = 0.04
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        for name in (
+            "mass_kg",
+            "lateral_friction",
+            "rolling_friction",
+            "spinning_friction",
+            "linear_damping",
+            "angular_damping",
+        ):
+            if getattr(self, name) < 0:
+                raise _bad(
+                    f"world.physics.*.{name}",
+                    getattr(self, name),
+                    "must be >= 0",
+                    f"set {name} to a non-negative value",
+                )
+        if not 0 <= self.restitution <= 1:
+            raise _bad("world.physics.*.restitution", self.restitution, "must be in [0, 1]", "use e.g. 0.1")
+
+
+def _default_physics() -> dict[str, ObjectPhysicsConfig]:
+    return {
+        "floor": ObjectPhysicsConfig(lateral_friction=1.0),
+        "structure": ObjectPhysicsConfig(lateral_friction=0.7),
+        "shelf": ObjectPhysicsConfig(lateral_friction=0.6),
+        "box": ObjectPhysicsConfig(mass_kg=30.0, lateral_friction=0.6, restitution=0.05),
+        "pallet": ObjectPhysicsConfig(mass_kg=25.0, lateral_friction=0.7, restitution=0.05),
+    }
+
+
+@dataclass
+class WorldConfig:
+    """The warehouse: SIMLAN's layout table, a fidelity level and physics."""
+
+    layout: str = "warehouse_layout.csv"
+    fidelity: str = "default"
+    physics_hz: int = 240
+    gravity_mps2: float = 9.81
+    settle_s: float = 2.0
+    physics: dict[str, ObjectPhysicsConfig] = field(default_factory=_default_physics)
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("world.fidelity", self.fidelity, FIDELITIES)
+        if not 60 <= self.physics_hz <= 2000:
+            raise _bad("world.physics_hz", self.physics_hz, "must be within 60..2000 Hz", "use 240")
+        if not 0 <= self.settle_s <= 60:
+            raise _bad("world.settle_s", self.settle_s, "must be within 0..60 s", "use 2.0")
+        if not 0 <= self.gravity_mps2 <= 100:
+            raise _bad("world.gravity_mps2", self.gravity_mps2, "must be within 0..100 m/s^2", "use 9.81")
+
+
+@dataclass
+class CameraSetConfig:
+    """A set of calibrated cameras and how they render."""
+
+    name: str = "gpss"
+    ids: list[int] = MISSING
+    rate_hz: float = 5.0
+    width: int = 960
+    height: int = 540
+    streams: list[str] = field(default_factory=lambda: list(STREAMS))
+    distortion: bool = True
+    near_m: float = 1.0
+    far_m: float = 100.0
+    calibration_dir: str = ""
+    calibration_check: str = "warn"
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if len(self.ids) == 0:
+            raise _bad(
+                "cameras.ids",
+                list(self.ids),
+                "no camera selected",
+                "list at least one id, e.g. cameras.ids=[160]",
+            )
+        if len(set(self.ids)) != len(self.ids):
+            raise _bad("cameras.ids", list(self.ids), "an id appears twice", "list each camera once")
+        _positive("cameras.rate_hz", self.rate_hz, "use e.g. cameras.rate_hz=5")
+        if not (16 <= self.width <= 7680 and 16 <= self.height <= 4320):
+            raise _bad(
+                "cameras.width x height",
+                f"{self.width}x{self.height}",
+                "must be within 16x16..7680x4320",
+                "use e.g. 960x540",
+            )
+        for s in self.streams:
+            _choice("cameras.streams[]", s, STREAMS)
+        if "rgb" not in self.streams:
+            raise _bad(
+                "cameras.streams",
+                list(self.streams),
+                "rgb is required (localization and recording need it)",
+                "add rgb",
+            )
+        if not 0 < self.near_m < self.far_m:
+            raise _bad(
+                "cameras.near_m/far_m",
+                (self.near_m, self.far_m),
+                "need 0 < near_m < far_m",
+                "use near_m=1.0 far_m=100.0",
+            )
+        _choice("cameras.calibration_check", self.calibration_check, CALIBRATION_CHECKS)
+
+
+@dataclass
+class RenderConfig:
+    """Renderer: PyBullet's EGL plugin (software or GPU) or TinyRenderer, layered or full."""
+
+    backend: str = "auto"
+    layered: bool = True
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("render.backend", self.backend, RENDER_BACKENDS)
+
+
+@dataclass
+class RecordingConfig:
+    """What the ROS 2 bag holds and how it is encoded and flushed."""
+
+    enabled: bool = True
+    rgb_encoding: str = "jpeg"
+    jpeg_quality: int = 85
+    depth_encoding: str = "png"
+    semantic_encoding: str = "png"
+    depth_rate_hz: float = 1.0
+    semantic_rate_hz: float = 1.0
+    ground_truth_rate_hz: float = 60.0
+    compression: str = "zstd"
+    flush_period_s: float = 1.0
+    encode_threads: int = 2
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("recording.rgb_encoding", self.rgb_encoding, RGB_ENCODINGS)
+        _choice("recording.depth_encoding", self.depth_encoding, DEPTH_ENCODINGS)
+        _choice("recording.semantic_encoding", self.semantic_encoding, SEMANTIC_ENCODINGS)
+        _choice("recording.compression", self.compression, CHUNK_COMPRESSIONS)
+        if not 1 <= self.jpeg_quality <= 100:
+            raise _bad("recording.jpeg_quality", self.jpeg_quality, "must be within 1..100", "use 90")
+        if not 50 <= self.ground_truth_rate_hz <= 1000:
+            raise _bad(
+                "recording.ground_truth_rate_hz",
+                self.ground_truth_rate_hz,
+                "ground truth must be recorded at 50 Hz or more",
+                "use 60",
+            )
+        _positive(
+            "recording.flush_period_s",
+            self.flush_period_s,
+            "use 1.0 (at most one second of data lost on a crash)",
+        )
+        if not 0 <= self.encode_threads <= 16:
+            raise _bad(
+                "recording.encode_threads",
+                self.encode_threads,
+                "must be within 0..16 (0 encodes on the simulation thread)",
+                "use 2",
+            )
+
+
+@dataclass
+class AgentConfig:
+    """One agent to spawn: namespace robot_agent_N, type, initial pose, ArUco marker id, route."""
+
+    namespace: str = MISSING
+    type: str = "pallet_truck"
+    pose: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    marker_id: Optional[int] = None  # noqa: UP045 - OmegaConf needs typing.Optional
+    waypoints: list[list[float]] = field(default_factory=list)
+    speed_mps: float = 1.0
+    loop: bool = False
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        m = NAMESPACE_RE.match(self.namespace)
+        if not m:
+            raise _bad(
+                "agents[].namespace",
+                self.namespace,
+                "must be robot_agent_N (SIMLAN's namespaces)",
+                "rename it, e.g. robot_agent_1",
+            )
+        if self.marker_id is None:
+            self.marker_id = int(m.group(1))
+        if not 0 <= self.marker_id < 1000:
+            raise _bad(
+                f"agents[{self.namespace}].marker_id",
+                self.marker_id,
+                "DICT_5X5_1000 has ids 0..999",
+                "use the N of robot_agent_N",
+            )
+        if len(self.pose) != 3:
+            raise _bad(
+                f"agents[{self.namespace}].pose",
+                list(self.pose),
+                "expected [x_m, y_m, yaw_rad]",
+                "give three numbers",
+            )
+        for i, wp in enumerate(self.waypoints):
+            if len(wp) != 2:
+                raise _bad(
+                    f"agents[{self.namespace}].waypoints[{i}]",
+                    list(wp),
+                    "expected [x_m, y_m]",
+                    "give two numbers per waypoint",
+                )
+        if not 0 < self.speed_mps <= 3.0:
+            raise _bad(
+                f"agents[{self.namespace}].speed_mps",
+                self.speed_mps,
+                "must be within (0, 3] m/s",
+                "use e.g. 1.0",
+            )
+
+    @property
+    def number(self) -> int:
+        m = NAMESPACE_RE.match(self.namespace)
+        assert m is not None
+        return int(m.group(1))
+
+
+@dataclass
+class ScenarioConfig:
+    name: str = "default"
+    description: str = ""
+
+
+@dataclass
+class Config:
+    """A run: (config, seed) -> recording + metrics."""
+
+    seed: int = 0
+    duration_s: float = 60.0
+    control_rate_hz: float = 20.0
+    progress: bool = True
+    scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
+    world: WorldConfig = field(default_factory=WorldConfig)
+    cameras: CameraSetConfig = field(default_factory=CameraSetConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    recording: RecordingConfig = field(default_factory=RecordingConfig)
+    agents: list[AgentConfig] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if not 0 < self.duration_s <= 24 * 3600:
+            raise _bad(
+                "duration_s", self.duration_s, "must be within (0, 86400] seconds", "use e.g. duration_s=60"
+            )
+        if not 0 <= self.seed < 2**32:
+            raise _bad("seed", self.seed, "must be within 0..2^32-1", "use e.g. seed=0")
+        physics_hz = self.world.physics_hz
+        _divides("control_rate_hz", self.control_rate_hz, physics_hz)
+        _divides("cameras.rate_hz", self.cameras.rate_hz, physics_hz)
+        _divides("recording.ground_truth_rate_hz", self.recording.ground_truth_rate_hz, physics_hz)
+        for name in ("depth_rate_hz", "semantic_rate_hz"):
+            rate = getattr(self.recording, name)
+            _positive(f"recording.{name}", rate, f"use a divisor of cameras.rate_hz={self.cameras.rate_hz}")
+            frames = self.cameras.rate_hz / rate
+            if rate > self.cameras.rate_hz or abs(frames - round(frames)) > 1e-9:
+                raise _bad(
+                    f"recording.{name}",
+                    rate,
+                    f"must divide the camera rate cameras.rate_hz={self.cameras.rate_hz} (every n-th frame is recorded)",
+                    f"use e.g. {self.cameras.rate_hz} or {self.cameras.rate_hz / 5:g}",
+                )
+        seen_ns: set[str] = set()
+        seen_marker: dict[int, str] = {}
+        for agent in self.agents:
+            if agent.namespace in seen_ns:
+                raise _bad(
+                    "agents[].namespace",
+                    agent.namespace,
+                    "appears twice",
+                    "give every agent its own robot_agent_N",
+                )
+            seen_ns.add(agent.namespace)
+            assert agent.marker_id is not None
+            if agent.marker_id in seen_marker:
+                raise _bad(
+                    f"agents[{agent.namespace}].marker_id",
+                    agent.marker_id,
+                    f"already used by {seen_marker[agent.marker_id]}",
+                    "give every robot its own marker id",
+                )
+            seen_marker[agent.marker_id] = agent.namespace
+
+
+def register_configs() -> None:
+    """Register the schema with Hydra's ConfigStore (conf/config.yaml lists it first)."""
+    cs = ConfigStore.instance()
+    cs.store(name="simlan_schema", node=Config)

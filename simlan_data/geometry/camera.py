@@ -1,0 +1,246 @@
+"""Pinhole camera with OpenCV's 5-parameter distortion (k1 k2 p1 p2 k3) and fixed extrinsics.
+
+Conventions:
+- Pixel coordinates follow OpenCV: the centre of pixel (i, j) is (u, v) = (i, j), u right, v down.
+- The camera (optical) frame follows OpenCV/REP-103: x right, y down, z forward.
+- ``camera_from_world`` is SIMLAN's (rot_mat, t_vec): x_cam = R x_world + t.
+- OpenGL matrices (for PyBullet) are 4x4 in column-major order, as ``getCameraImage`` expects.
+
+Strong barrel distortion makes the polynomial radial model fold back beyond a radius (for the
+GPSS cameras at about r = 1.3, i.e. near the image border). Pixels whose ray would lie beyond
+``valid_radius`` have no valid ray: they are masked, as a real camera's vignetted corners.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .rotations import FloatArray
+from .transforms import Transform
+
+# Slope d(r_distorted)/d(r) below which the radial model is considered no longer valid: beyond it
+# one output pixel would stretch over more than 10 pixels of the ideal image.
+MIN_RADIAL_SLOPE = 0.1
+
+_GL_FROM_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+@dataclass(frozen=True, eq=False)
+class CameraModel:
+    """A calibrated camera: intrinsics K, distortion D, image size and pose in the world."""
+
+    camera_id: str
+    width: int
+    height: int
+    K: FloatArray
+    D: FloatArray
+    camera_from_world: Transform
+    frame_id: str = field(default="")
+
+    def __post_init__(self) -> None:
+        if not self.frame_id:
+            object.__setattr__(self, "frame_id", f"camera_{self.camera_id}_optical_frame")
+
+    # ----------------------------------------------------------------------------------- pose
+    @property
+    def world_from_camera(self) -> Transform:
+        return self.camera_from_world.inverse()
+
+    @property
+    def position(self) -> FloatArray:
+        """Camera centre in the world, -R^T t."""
+        return self.world_from_camera.translation
+
+    @property
+    def projection_matrix(self) -> FloatArray:
+        """P = K [R | t] (3x4), pixels from homogeneous world points, without distortion."""
+        rt = np.hstack([self.camera_from_world.rotation, self.camera_from_world.translation[:, None]])
+        return self.K @ rt
+
+    # ------------------------------------------------------------------------------ intrinsics
+    def scaled(self, width: int, height: int) -> CameraModel:
+        """Return the same camera at another image resolution (pixel-centre aware scaling)."""
+        sx, sy = width / self.width, height / self.height
+        K = self.K.copy()
+        K[0, 0] *= sx
+        K[1, 1] *= sy
+        K[0, 2] = (self.K[0, 2] + 0.5) * sx - 0.5
+        K[1, 2] = (self.K[1, 2] + 0.5) * sy - 0.5
+        return replace(self, width=int(width), height=int(height), K=K)
+
+    @cached_property
+    def valid_radius(self) -> float:
+        """Largest normalized undistorted radius where the radial model is still monotonic."""
+        k1, k2, _, _, k3 = (float(x) for x in self.D[:5])
+        # slope(r) = 1 + 3 k1 r^2 + 5 k2 r^4 + 7 k3 r^6 ; find its first r > 0 below MIN_RADIAL_SLOPE
+        coeffs = [7.0 * k3, 5.0 * k2, 3.0 * k1, 1.0 - MIN_RADIAL_SLOPE]  # in s = r^2
+        roots = np.roots(coeffs) if any(abs(c) > 0 for c in coeffs[:3]) else np.array([])
+        real = [r.real for r in roots if abs(r.imag) < 1e-12 and r.real > 0]
+        return float(np.sqrt(min(real))) if real else float("inf")
+
+    # ------------------------------------------------------------------------------ projection
+    def world_to_camera(self, points_world: ArrayLike) -> FloatArray:
+        return self.camera_from_world.apply(points_world)
+
+    def project(
+        self, points_world: ArrayLike, *, distort: bool = True
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Project world points (N, 3) to pixels (N, 2).
+
+        Returns the pixels and a mask of points in front of the camera whose ray lies inside the
+        valid model radius (pixels of other points are meaningless).
+        """
+        pts_cam = np.atleast_2d(self.world_to_camera(points_world))
+        return self.project_camera_points(pts_cam, distort=distort)
+
+    def project_camera_points(
+        self, pts_cam: ArrayLike, *, distort: bool = True
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        pts = np.atleast_2d(np.asarray(pts_cam, dtype=float))
+        z = pts[:, 2]
+        front = z > 1e-9
+        safe_z = np.where(front, z, 1.0)
+        xy = pts[:, :2] / safe_z[:, None]
+        ok = front & (np.hypot(xy[:, 0], xy[:, 1]) <= self.valid_radius)
+        if distort:
+            uv = self.distort_normalized(xy)
+        else:
+            uv = xy * [self.K[0, 0], self.K[1, 1]] + [self.K[0, 2], self.K[1, 2]]
+        return uv, ok
+
+    def distort_normalized(self, xy: ArrayLike) -> FloatArray:
+        """Map ideal normalized coordinates (N, 2) to distorted pixels (N, 2) with OpenCV."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        pts = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
+        uv, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.K, self.D)
+        return uv.reshape(-1, 2)
+
+    def undistort_pixels(self, uv: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Map distorted pixels (N, 2) to ideal normalized coordinates (N, 2).
+
+        Newton's method on the full model (radial + tangential), started from the exact inverse
+        of the radial part on its monotonic branch. Returns the coordinates and a mask of pixels
+        that have a valid ray (inside ``valid_radius``, re-projecting within 1e-3 px).
+        """
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        fx, fy, cx, cy, skew = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.K[0, 1]
+        yd = (uv[:, 1] - cy) / fy
+        xd = (uv[:, 0] - cx - skew * yd) / fx
+        target = np.stack([xd, yd], axis=1)
+        k1, k2, p1, p2, k3 = (float(c) for c in self.D[:5])
+        r_max = min(self.valid_radius, 10.0)
+        r_tab = np.linspace(0.0, r_max, 4097)
+        rd_tab = r_tab * (1.0 + k1 * r_tab**2 + k2 * r_tab**4 + k3 * r_tab**6)
+        rd = np.hypot(xd, yd)
+        candidate = rd <= rd_tab[-1]
+        r0 = np.interp(rd[candidate], rd_tab, r_tab)
+        rdc = rd[candidate]
+        scale = np.divide(r0, rdc, out=np.ones_like(rdc), where=rdc > 1e-12)
+        xdc, ydc = xd[candidate], yd[candidate]
+        x, y = xdc * scale, ydc * scale
+        for _ in range(8):
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            dR = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+            ex = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xdc
+            ey = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - ydc
+            a = radial + 2.0 * x * x * dR + 2.0 * p1 * y + 6.0 * p2 * x
+            b = 2.0 * x * y * dR + 2.0 * p1 * x + 2.0 * p2 * y
+            d = radial + 2.0 * y * y * dR + 6.0 * p1 * y + 2.0 * p2 * x
+            det = a * d - b * b
+            det = np.where(np.abs(det) < 1e-12, 1e-12, det)
+            step_x = (d * ex - b * ey) / det
+            step_y = (a * ey - b * ex) / det
+            x = x - step_x
+            y = y - step_y
+            if np.max(np.abs(step_x) + np.abs(step_y), initial=0.0) < 1e-13:
+                break
+        x_all = np.zeros_like(xd)
+        y_all = np.zeros_like(yd)
+        x_all[candidate], y_all[candidate] = x, y
+        x, y = x_all, y_all
+        xy = np.stack([x, y], axis=1)
+        finite = np.all(np.isfinite(xy), axis=1)
+        xy = np.where(finite[:, None], xy, 0.0)
+        residual_px = np.hypot(*((self._distort_numpy(xy) - target) * [fx, fy]).T)
+        ok = finite & candidate & (np.hypot(xy[:, 0], xy[:, 1]) <= self.valid_radius) & (residual_px < 1e-3)
+        return xy, ok
+
+    def _distort_numpy(self, xy: FloatArray) -> FloatArray:
+        """Apply the distortion to normalized coordinates, in normalized units (no K)."""
+        k1, k2, p1, p2, k3 = (float(c) for c in self.D[:5])
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        return np.stack(
+            [
+                x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+                y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+            ],
+            axis=1,
+        )
+
+    def pixel_rays(self, uv: ArrayLike, *, distorted: bool = True) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Return unit rays in the camera frame (N, 3) through pixels, and their validity."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        if distorted:
+            xy, ok = self.undistort_pixels(uv)
+        else:
+            xy = (uv - [self.K[0, 2], self.K[1, 2]]) / [self.K[0, 0], self.K[1, 1]]
+            ok = np.ones(len(uv), dtype=bool)
+        rays = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
+        return rays / np.linalg.norm(rays, axis=1, keepdims=True), ok
+
+    def intersect_plane_z(
+        self, uv: ArrayLike, z_m: float, *, distorted: bool = True
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Intersect pixel rays with the horizontal world plane z = ``z_m``; (N, 3) and validity."""
+        rays_cam, ok = self.pixel_rays(uv, distorted=distorted)
+        rays_w = rays_cam @ self.world_from_camera.rotation.T
+        origin = self.position
+        dz = rays_w[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (z_m - origin[2]) / dz
+        ok = ok & np.isfinite(s) & (s > 0)
+        s = np.where(ok, s, 0.0)
+        return origin + s[:, None] * rays_w, ok
+
+    # ------------------------------------------------------------------------------- OpenGL
+    def opengl_view(self) -> list[float]:
+        """World -> OpenGL eye matrix, column-major (PyBullet's viewMatrix)."""
+        return (_GL_FROM_CV @ self.camera_from_world.matrix()).T.ravel().tolist()
+
+
+def opengl_projection(K: ArrayLike, width: int, height: int, *, near_m: float, far_m: float) -> list[float]:
+    """OpenGL projection for an OpenCV K and image size, column-major (PyBullet's projectionMatrix).
+
+    Pixel (i, j) of the rendered (top-row-first) image is the pixel centre (u, v) = (i, j) of K.
+    A region of interest is rendered by shifting the principal point: K with cx - u0, cy - v0.
+    """
+    K = np.asarray(K, dtype=float)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    P = np.zeros((4, 4))
+    P[0, 0] = 2.0 * fx / width
+    P[0, 1] = -2.0 * K[0, 1] / width
+    P[0, 2] = 1.0 - 2.0 * (cx + 0.5) / width
+    P[1, 1] = 2.0 * fy / height
+    P[1, 2] = 2.0 * (cy + 0.5) / height - 1.0
+    P[2, 2] = -(far_m + near_m) / (far_m - near_m)
+    P[2, 3] = -2.0 * far_m * near_m / (far_m - near_m)
+    P[3, 2] = -1.0
+    return P.T.ravel().tolist()
+
+
+def linearize_depth(
+    depth_buffer: NDArray[np.floating], *, near_m: float, far_m: float
+) -> NDArray[np.float32]:
+    """Convert an OpenGL depth buffer in [0, 1] to metric z-depth; background (1.0) becomes 0."""
+    d = depth_buffer.astype(np.float64)
+    z = far_m * near_m / (far_m - (far_m - near_m) * d)
+    z[d >= 1.0] = 0.0
+    return z.astype(np.float32)

@@ -1,0 +1,201 @@
+"""Build ROS 2 message objects (rosbags typestore classes) from numpy values."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..constants import NS_PER_S
+from ..geometry.camera import CameraModel
+from ..geometry.transforms import Transform
+from . import schema
+
+T = schema.typestore().types
+Time = T["builtin_interfaces/msg/Time"]
+Header = T["std_msgs/msg/Header"]
+Vector3 = T["geometry_msgs/msg/Vector3"]
+Quaternion = T["geometry_msgs/msg/Quaternion"]
+Point = T["geometry_msgs/msg/Point"]
+Pose = T["geometry_msgs/msg/Pose"]
+PoseStamped = T["geometry_msgs/msg/PoseStamped"]
+TransformMsg = T["geometry_msgs/msg/Transform"]
+TransformStamped = T["geometry_msgs/msg/TransformStamped"]
+Twist = T["geometry_msgs/msg/Twist"]
+TwistStamped = T[schema.TWIST_STAMPED_TYPE]
+TFMessage = T[schema.TF_TYPE]
+Clock = T[schema.CLOCK_TYPE]
+String = T[schema.STRING_TYPE]
+Image = T[schema.IMAGE_TYPE]
+CompressedImage = T[schema.COMPRESSED_IMAGE_TYPE]
+CameraInfo = T[schema.CAMERA_INFO_TYPE]
+RegionOfInterest = T["sensor_msgs/msg/RegionOfInterest"]
+Path = T[schema.PATH_TYPE]
+RunInfo = T[schema.RUN_INFO_TYPE]
+SemanticLabels = T[schema.SEMANTIC_LABELS_TYPE]
+CollisionState = T[schema.COLLISION_STATE_TYPE]
+
+
+def time_msg(stamp_ns: int) -> Any:
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def stamp_ns_of(time: Any) -> int:
+    return int(time.sec) * NS_PER_S + int(time.nanosec)
+
+
+def header(stamp_ns: int, frame_id: str) -> Any:
+    return Header(stamp=time_msg(stamp_ns), frame_id=frame_id)
+
+
+def transform_stamped(stamp_ns: int, parent: str, child: str, tf: Transform) -> Any:
+    x, y, z, w = (float(v) for v in tf.quat())
+    tx, ty, tz = (float(v) for v in tf.translation)
+    return TransformStamped(
+        header=header(stamp_ns, parent),
+        child_frame_id=child,
+        transform=TransformMsg(
+            translation=Vector3(x=tx, y=ty, z=tz), rotation=Quaternion(x=x, y=y, z=z, w=w)
+        ),
+    )
+
+
+def tf_message(transforms: Iterable[Any]) -> Any:
+    return TFMessage(transforms=list(transforms))
+
+
+def clock(stamp_ns: int) -> Any:
+    return Clock(clock=time_msg(stamp_ns))
+
+
+def string(text: str) -> Any:
+    return String(data=text)
+
+
+def compressed_image(stamp_ns: int, frame_id: str, fmt: str, data: bytes) -> Any:
+    return CompressedImage(
+        header=header(stamp_ns, frame_id), format=fmt, data=np.frombuffer(data, dtype=np.uint8)
+    )
+
+
+def raw_image(stamp_ns: int, frame_id: str, array: np.ndarray) -> Any:
+    """sensor_msgs/Image from rgb8 (H, W, 3) uint8, mono8 (H, W) uint8 or 32FC1 (H, W) float32."""
+    arr = np.ascontiguousarray(array)
+    if arr.dtype == np.uint8 and arr.ndim == 3:
+        encoding = "rgb8"
+    elif arr.dtype == np.uint8:
+        encoding = "mono8"
+    elif arr.dtype == np.float32:
+        encoding = "32FC1"
+    else:
+        raise ValueError(f"no raw image encoding for {arr.dtype} {arr.shape}")
+    height, width = arr.shape[:2]
+    return Image(
+        header=header(stamp_ns, frame_id),
+        height=height,
+        width=width,
+        encoding=encoding,
+        is_bigendian=0,
+        step=arr.strides[0],
+        data=arr.view(np.uint8).reshape(-1),
+    )
+
+
+def camera_info(stamp_ns: int, camera: CameraModel) -> Any:
+    K = camera.K
+    P = np.zeros((3, 4))
+    P[:, :3] = K
+    return CameraInfo(
+        header=header(stamp_ns, camera.frame_id),
+        height=camera.height,
+        width=camera.width,
+        distortion_model="plumb_bob",
+        d=np.asarray(camera.D, dtype=np.float64).reshape(-1),
+        k=K.astype(np.float64).reshape(-1),
+        r=np.eye(3).reshape(-1),
+        p=P.reshape(-1),
+        binning_x=0,
+        binning_y=0,
+        roi=RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
+    )
+
+
+def twist_stamped(stamp_ns: int, frame_id: str, linear_mps: float, angular_rps: float) -> Any:
+    return TwistStamped(
+        header=header(stamp_ns, frame_id),
+        twist=Twist(
+            linear=Vector3(x=float(linear_mps), y=0.0, z=0.0),
+            angular=Vector3(x=0.0, y=0.0, z=float(angular_rps)),
+        ),
+    )
+
+
+def pose_msg(x: float, y: float, z: float, quat_xyzw: Sequence[float]) -> Any:
+    qx, qy, qz, qw = (float(v) for v in quat_xyzw)
+    return Pose(
+        position=Point(x=float(x), y=float(y), z=float(z)), orientation=Quaternion(x=qx, y=qy, z=qz, w=qw)
+    )
+
+
+def path(stamp_ns: int, frame_id: str, points_xy: Sequence[Sequence[float]]) -> Any:
+    poses = []
+    for i, (x, y) in enumerate(points_xy):
+        if i + 1 < len(points_xy):
+            nx, ny = points_xy[i + 1]
+            yaw = float(np.arctan2(ny - y, nx - x))
+        elif i > 0:
+            px, py = points_xy[i - 1]
+            yaw = float(np.arctan2(y - py, x - px))
+        else:
+            yaw = 0.0
+        q = (0.0, 0.0, float(np.sin(yaw / 2)), float(np.cos(yaw / 2)))
+        poses.append(PoseStamped(header=header(stamp_ns, frame_id), pose=pose_msg(x, y, 0.0, q)))
+    return Path(header=header(stamp_ns, frame_id), poses=poses)
+
+
+def run_info(
+    *,
+    format_version: str,
+    version: str,
+    scenario: str,
+    seed: int,
+    renderer: str,
+    renderer_info: str,
+    dependencies: dict[str, str],
+) -> Any:
+    names = sorted(dependencies)
+    return RunInfo(
+        format_version=format_version,
+        simlan_data_version=version,
+        scenario=scenario,
+        seed=int(seed),
+        renderer=renderer,
+        renderer_info=renderer_info,
+        dependency_names=names,
+        dependency_versions=[dependencies[n] for n in names],
+    )
+
+
+def semantic_labels(table: dict[str, int]) -> Any:
+    items = sorted(table.items(), key=lambda kv: kv[1])
+    return SemanticLabels(ids=np.array([v for _, v in items], dtype=np.uint8), names=[k for k, _ in items])
+
+
+def collision_state(
+    stamp_ns: int,
+    frame_id: str,
+    *,
+    in_collision: bool,
+    max_force_n: float,
+    total_force_n: float,
+    others: Sequence[str],
+) -> Any:
+    return CollisionState(
+        header=header(stamp_ns, frame_id),
+        in_collision=bool(in_collision),
+        max_normal_force_n=float(max_force_n),
+        total_normal_force_n=float(total_force_n),
+        other_bodies=list(others),
+    )

@@ -1,0 +1,269 @@
+"""Read a recording: time-ordered typed messages by topic, and a ``ros2 bag info``-like summary."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+from rosbags.rosbag2 import Reader
+from rosbags.rosbag2.errors import ReaderError
+from rosbags.typesys import get_types_from_msg
+from rosbags.typesys.store import Typestore
+
+from ..constants import FORMAT_MAJOR, NS_PER_S
+from ..errors import RecordingInputError
+from . import schema
+
+METADATA_KEY_FORMAT = "simlan.format_version"
+
+
+@dataclass(frozen=True)
+class Message:
+    """One message: topic, log time (simulated clock, ns), type name and the decoded object."""
+
+    topic: str
+    stamp_ns: int
+    msgtype: str
+    msg: Any
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    name: str
+    msgtype: str
+    count: int
+
+
+def _bad(
+    path: Path, why: str, fix: str = "record it again or run `python -m simlan_data.replay PATH --recover`"
+) -> RecordingInputError:
+    return RecordingInputError("not a readable recording", str(path), why, fix)
+
+
+class RecordingReader:
+    """Open a recording directory (or its metadata.yaml) for reading; use as a context manager."""
+
+    def __init__(self, path: Path | str, *, check_format: bool = True) -> None:
+        p = Path(path)
+        if p.is_file() and p.name == "metadata.yaml":
+            p = p.parent
+        if p.is_dir() and not (p / "metadata.yaml").exists() and (p / "recording" / "metadata.yaml").exists():
+            p = p / "recording"  # a run directory
+        if not p.exists():
+            raise _bad(p, "no such file or directory", "check the path")
+        if not (p / "metadata.yaml").is_file():
+            raise _bad(p, "no metadata.yaml (not a ROS 2 bag, or an unfinished one)")
+        self.path = p
+        self._store: Typestore = schema.typestore()
+        try:
+            self._reader = Reader(p)
+            self._reader.open()
+        except (ReaderError, OSError, ValueError, KeyError, TypeError, UnicodeDecodeError) as err:
+            raise _bad(
+                p, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else 'unreadable'}"
+            ) from err
+        except Exception as err:  # rosbags raises assorted errors on corrupt input
+            raise _bad(
+                p, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else 'unreadable'}"
+            ) from err
+        self._metadata = _read_metadata(p)
+        self._register_bag_types()
+        self.format_version = self.custom_data.get(METADATA_KEY_FORMAT, "")
+        if check_format:
+            self._check_format()
+
+    # ---------------------------------------------------------------------------- metadata
+    @property
+    def custom_data(self) -> dict[str, str]:
+        """metadata.yaml's custom_data (format version, seed, scenario, renderer)."""
+        return dict(self._metadata.get("custom_data") or {})
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        out: dict[str, TopicInfo] = {}
+        for c in self._reader.connections:
+            prev = out.get(c.topic)
+            out[c.topic] = TopicInfo(c.topic, c.msgtype, c.msgcount + (prev.count if prev else 0))
+        return out
+
+    @property
+    def start_ns(self) -> int:
+        return int(self._reader.start_time)
+
+    @property
+    def end_ns(self) -> int:
+        return int(self._reader.end_time)
+
+    @property
+    def duration_ns(self) -> int:
+        return max(0, self.end_ns - self.start_ns)
+
+    @property
+    def message_count(self) -> int:
+        return int(self._reader.message_count)
+
+    def _check_format(self) -> None:
+        version = self.format_version
+        if not version:
+            raise RecordingInputError(
+                "recording has no simlan_data format version",
+                str(self.path),
+                f"metadata.yaml custom_data lacks {METADATA_KEY_FORMAT}",
+                "only recordings written by simlan_data can be replayed",
+            )
+        try:
+            major = int(version.split(".")[0])
+        except ValueError:
+            raise RecordingInputError(
+                "recording format version unreadable",
+                str(self.path),
+                f"{version!r}",
+                "the metadata is corrupt",
+            ) from None
+        if major > FORMAT_MAJOR:
+            raise RecordingInputError(
+                f"recording format {version} is newer than this simlan_data ({FORMAT_MAJOR}.x)",
+                str(self.path),
+                "it may hold data this version cannot interpret",
+                "upgrade simlan_data",
+            )
+        if major < FORMAT_MAJOR:
+            raise RecordingInputError(
+                f"recording format {version} is older than this simlan_data ({FORMAT_MAJOR}.x)",
+                str(self.path),
+                "no converter exists yet for that major version",
+                "replay it with the simlan_data version that wrote it",
+            )
+
+    def require_topics(self, names: Iterable[str]) -> None:
+        missing = [n for n in names if n not in self.topics]
+        if missing:
+            raise RecordingInputError(
+                "recording lacks required topics",
+                str(self.path),
+                ", ".join(missing),
+                "record with a config that publishes them",
+            )
+
+    def _register_bag_types(self) -> None:
+        """Register message types that the bag defines and our typestore lacks."""
+        extra: dict[str, Any] = {}
+        for c in self._reader.connections:
+            if c.msgtype in self._store.types or c.msgtype in extra:
+                continue
+            try:
+                if c.msgdef.data:
+                    extra.update(get_types_from_msg(c.msgdef.data, c.msgtype))
+            except Exception:
+                continue
+        if extra:
+            with contextlib.suppress(Exception):
+                self._store.register(extra)
+
+    # ---------------------------------------------------------------------------- messages
+    def messages(
+        self,
+        topics: Iterable[str] | None = None,
+        *,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+        raw: bool = False,
+    ) -> Iterator[Message]:
+        """Yield messages in log-time order, decoded unless ``raw`` (then ``msg`` is bytes)."""
+        wanted = set(topics) if topics is not None else None
+        conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
+        if not conns:
+            return
+        try:
+            for conn, stamp, data in self._reader.messages(connections=conns, start=start_ns, stop=stop_ns):
+                if raw:
+                    yield Message(conn.topic, int(stamp), conn.msgtype, data)
+                    continue
+                try:
+                    msg = self._store.deserialize_cdr(data, conn.msgtype)
+                except Exception as err:
+                    raise RecordingInputError(
+                        "message undecodable",
+                        f"{self.path} topic {conn.topic} at {stamp} ns",
+                        f"{type(err).__name__}: {err}",
+                        "the recording is corrupt; try --recover",
+                    ) from err
+                yield Message(conn.topic, int(stamp), conn.msgtype, msg)
+        except RecordingInputError:
+            raise
+        except Exception as err:
+            raise _bad(
+                self.path,
+                f"{type(err).__name__} while reading messages: {str(err).splitlines()[0] if str(err) else ''}",
+            ) from err
+
+    def first(self, topic: str) -> Message | None:
+        for m in self.messages([topic]):
+            return m
+        return None
+
+    # ----------------------------------------------------------------------------- summary
+    def summary(self) -> str:
+        """A ``ros2 bag info``-style text summary."""
+        files = sorted(self.path.glob("*.mcap"))
+        size = sum(f.stat().st_size for f in files)
+        lines = [
+            f"Files:             {', '.join(f.name for f in files)}",
+            f"Bag size:          {_human_bytes(size)}",
+            "Storage id:        mcap",
+            f"Format version:    {self.format_version or '?'}",
+            f"Duration:          {self.duration_ns / NS_PER_S:.3f}s",
+            f"Start:             {self.start_ns / NS_PER_S:.3f} (simulated clock, s)",
+            f"End:               {self.end_ns / NS_PER_S:.3f}",
+            f"Messages:          {self.message_count}",
+            "Topic information:",
+        ]
+        topics = sorted(self.topics.values(), key=lambda t: t.name)
+        width = max((len(t.name) for t in topics), default=10)
+        for t in topics:
+            lines.append(f"  Topic: {t.name:<{width}} | Type: {t.msgtype} | Count: {t.count}")
+        return "\n".join(lines)
+
+    def close(self) -> None:
+        self._reader.close()
+
+    def __enter__(self) -> RecordingReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+MAX_METADATA_BYTES = 16 << 20
+
+
+def _read_metadata(path: Path) -> dict[str, Any]:
+    """The rosbag2_bagfile_information of metadata.yaml (already validated by rosbags)."""
+    meta = path / "metadata.yaml"
+    if meta.stat().st_size > MAX_METADATA_BYTES:
+        raise _bad(path, f"metadata.yaml is larger than {MAX_METADATA_BYTES} bytes")
+    try:
+        data = yaml.safe_load(meta.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise _bad(path, f"metadata.yaml unreadable: {_first(err)}") from err
+    info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
+    if not isinstance(info, dict):
+        raise _bad(path, "metadata.yaml lacks rosbag2_bagfile_information")
+    return info
+
+
+def _first(err: BaseException) -> str:
+    text = str(err).strip().splitlines()
+    return text[0] if text else type(err).__name__
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.1f} GiB"

@@ -1,0 +1,160 @@
+"""The recording contract: every topic name, message type and frame name, in one place.
+
+Standard ROS 2 types wherever one fits; custom types live in the ``simlan_msgs`` package of .msg
+files shipped in ``simlan_data/recording/msg`` and embedded in each bag's MCAP schemas, so any
+MCAP/ROS 2 reader can decode them without ROS installed.
+
+Frames (SIMLAN's): ``map`` is the world, static at the origin; ``camera_<id>_optical_frame`` is a
+camera (OpenCV axes: x right, y down, z forward); ``<ns>/base_link`` is an agent. Ground truth is
+on ``/ground_truth/...`` topics, never on ``/tf``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
+
+from ..constants import MSG_DIR
+
+MAP_FRAME = "map"
+
+# ---------------------------------------------------------------------------------- msg types
+CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+STRING_TYPE = "std_msgs/msg/String"
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE_TYPE = "sensor_msgs/msg/CompressedImage"
+CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+TWIST_STAMPED_TYPE = "geometry_msgs/msg/TwistStamped"
+PATH_TYPE = "nav_msgs/msg/Path"
+RUN_INFO_TYPE = "simlan_msgs/msg/RunInfo"
+SEMANTIC_LABELS_TYPE = "simlan_msgs/msg/SemanticLabels"
+COLLISION_STATE_TYPE = "simlan_msgs/msg/CollisionState"
+
+# ------------------------------------------------------------------------------------- topics
+CLOCK = "/clock"
+TF_STATIC = "/tf_static"
+GROUND_TRUTH_POSES = "/ground_truth/poses"
+CONFIG = "/simlan/config"
+RUN_INFO = "/simlan/run_info"
+SEMANTIC_LABELS = "/simlan/semantic_labels"
+
+
+@dataclass(frozen=True)
+class Topic:
+    """A topic name with its message type and a one-line description for the README."""
+
+    name: str
+    msgtype: str
+    description: str
+
+
+def camera_frame(camera_id: str | int) -> str:
+    return f"camera_{camera_id}_optical_frame"
+
+
+def base_link_frame(namespace: str) -> str:
+    return f"{namespace}/base_link"
+
+
+def odom_frame(namespace: str) -> str:
+    return f"{namespace}/odom"
+
+
+def camera_topics(
+    camera_id: str | int, *, rgb: str, depth: str | None, semantic: str | None
+) -> dict[str, Topic]:
+    """Topics of one camera for the given encodings (``raw`` or a compressed format).
+
+    Keys: ``rgb``, ``camera_info``, and ``depth`` / ``semantic`` when those streams are on.
+    """
+    base = f"/camera_{camera_id}"
+    out = {
+        "rgb": Topic(f"{base}/image_raw", IMAGE_TYPE, "colour image, rgb8, distorted like the real camera")
+        if rgb == "raw"
+        else Topic(
+            f"{base}/image_raw/compressed",
+            COMPRESSED_IMAGE_TYPE,
+            f"colour image, {rgb}, distorted like the real camera",
+        ),
+        "camera_info": Topic(
+            f"{base}/camera_info", CAMERA_INFO_TYPE, "K, D (plumb_bob), image size, at the image rate"
+        ),
+    }
+    if depth is not None:
+        out["depth"] = (
+            Topic(f"{base}/depth/image_raw", IMAGE_TYPE, "z-depth, 32FC1 metres, 0 = no return")
+            if depth == "raw"
+            else Topic(
+                f"{base}/depth/image_raw/compressedDepth",
+                COMPRESSED_IMAGE_TYPE,
+                "z-depth, 16UC1 millimetres in PNG (compressed_depth_image_transport), 0 = no return",
+            )
+        )
+    if semantic is not None:
+        out["semantic"] = (
+            Topic(
+                f"{base}/semantic/image_raw",
+                IMAGE_TYPE,
+                "semantic class ids, mono8 (see /simlan/semantic_labels)",
+            )
+            if semantic == "raw"
+            else Topic(
+                f"{base}/semantic/image_raw/compressed",
+                COMPRESSED_IMAGE_TYPE,
+                "semantic class ids, mono8 PNG (see /simlan/semantic_labels)",
+            )
+        )
+    return out
+
+
+def agent_topics(namespace: str) -> dict[str, Topic]:
+    """Topics of one agent."""
+    return {
+        "cmd_vel": Topic(
+            f"/{namespace}/cmd_vel",
+            TWIST_STAMPED_TYPE,
+            "velocity command applied to the robot, base_link frame",
+        ),
+        "collision": Topic(
+            f"/{namespace}/collision",
+            COLLISION_STATE_TYPE,
+            "collision sensor: contacts with anything but the floor",
+        ),
+        "plan": Topic(f"/{namespace}/plan", PATH_TYPE, "route the robot follows (map frame), on change"),
+    }
+
+
+GLOBAL_TOPICS: tuple[Topic, ...] = (
+    Topic(CLOCK, CLOCK_TYPE, "simulated clock, at the ground-truth rate"),
+    Topic(TF_STATIC, TF_TYPE, "map -> camera_<id>_optical_frame for every camera (latched, once)"),
+    Topic(GROUND_TRUTH_POSES, TF_TYPE, "ground truth map -> <ns>/base_link of every agent (>= 50 Hz)"),
+    Topic(CONFIG, STRING_TYPE, "the resolved run config as YAML (once)"),
+    Topic(RUN_INFO, RUN_INFO_TYPE, "format version, seed, package and dependency versions, renderer (once)"),
+    Topic(SEMANTIC_LABELS, SEMANTIC_LABELS_TYPE, "semantic class id -> name table (once)"),
+)
+
+REQUIRED_TOPICS = (CLOCK, TF_STATIC, GROUND_TRUTH_POSES, CONFIG, RUN_INFO)
+
+
+def custom_msg_definitions(msg_dir: Path = MSG_DIR) -> dict[str, str]:
+    """Return {msgtype: .msg text} of every custom type shipped with the package."""
+    out = {}
+    for path in sorted(msg_dir.glob("*/msg/*.msg")):
+        out[f"{path.parent.parent.name}/msg/{path.stem}"] = path.read_text()
+    return out
+
+
+@lru_cache(maxsize=1)
+def typestore() -> Typestore:
+    """ROS 2 (Jazzy) types plus the simlan_msgs types."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types = {}
+    for name, text in custom_msg_definitions().items():
+        types.update(get_types_from_msg(text, name))
+    store.register(types)
+    return store

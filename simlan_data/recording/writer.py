@@ -1,0 +1,247 @@
+"""Write a recording: a ROS 2 bag (metadata.yaml + MCAP) through rosbags, crash-tolerant.
+
+- Refuses to write into an existing path (rosbags does too): a failed run never touches an
+  existing recording.
+- Chunks are closed and flushed to the OS at least every ``flush_period_ns`` of simulated time,
+  so a crash loses at most that much data (see ``recording.recover``).
+- Encoding (JPEG/PNG) and serialization can run on worker threads, and the file is written by
+  an I/O thread; messages still reach the file in submission order, so the same run gives the
+  same bytes.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.rosbag2.errors import WriterError
+
+from ..constants import NS_PER_S
+from ..errors import RecordingError
+from .schema import Topic, typestore
+
+MAX_PENDING = 256  # bound the messages (and frames) waiting for the file
+
+
+class _Done:
+    """An already-available result with the Future interface the queue uses."""
+
+    __slots__ = ("_value",)
+
+    def __init__(self, value: Any) -> None:
+        self._value = value
+
+    def result(self) -> Any:
+        return self._value
+
+    def done(self) -> bool:
+        return True
+
+
+class RecordingWriter:
+    """Context manager writing typed messages to a new ROS 2 bag directory."""
+
+    def __init__(
+        self,
+        path: Path | str,
+        *,
+        compression: str = "zstd",
+        flush_period_ns: int = NS_PER_S,
+        encode_threads: int = 0,
+        fsync: bool = False,
+    ) -> None:
+        self.path = Path(path)
+        if self.path.exists():
+            raise RecordingError(
+                "recording exists",
+                str(self.path),
+                "simlan_data never overwrites a recording",
+                "choose another hydra.run.dir or remove it yourself",
+            )
+        self.flush_period_ns = int(flush_period_ns)
+        self.fsync = fsync
+        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        if compression == "zstd":
+            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._store = typestore()
+        self._connections: dict[str, Any] = {}
+        self._pool = (
+            ThreadPoolExecutor(max_workers=encode_threads, thread_name_prefix="encode")
+            if encode_threads > 0
+            else None
+        )
+        # FIFO of (topic, stamp, future bytes) drained in order by the I/O thread (None ends it)
+        self._queue: queue.Queue[tuple[Topic, int, Future[bytes] | _Done] | None] = queue.Queue(
+            maxsize=MAX_PENDING
+        )
+        self._io: threading.Thread | None = None
+        self._io_error: BaseException | None = None
+        self._last_flush_ns: int | None = None
+        self.message_counts: dict[str, int] = {}
+        self.byte_counts: dict[str, int] = {}
+        self.flushes = 0
+
+    # ------------------------------------------------------------------------------ lifecycle
+    def __enter__(self) -> RecordingWriter:
+        self.open()
+        return self
+
+    def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+    def open(self) -> None:
+        try:
+            self._writer.open()
+        except (WriterError, OSError) as err:
+            raise RecordingError(
+                "cannot create recording",
+                str(self.path),
+                str(err),
+                "check the directory is writable and does not exist",
+            ) from err
+        if self._pool is not None:
+            self._io = threading.Thread(target=self._io_loop, name="bag-writer", daemon=True)
+            self._io.start()
+
+    def _io_loop(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self._io_error is not None:
+                continue  # keep draining so producers never block; the error is raised to them
+            topic, stamp_ns, fut = item
+            try:
+                self._write_serialized(topic, stamp_ns, fut.result())
+            except BaseException as err:
+                self._io_error = err
+
+    def _put(self, item: tuple[Topic, int, Future[bytes] | _Done]) -> None:
+        if self._io_error is not None:
+            raise RecordingError(
+                "recording failed",
+                str(self.path),
+                f"{type(self._io_error).__name__}: {self._io_error}",
+                "check free disk space",
+            ) from self._io_error
+        if self._io is None:
+            topic, stamp_ns, fut = item
+            self._write_serialized(topic, stamp_ns, fut.result())
+        else:
+            self._queue.put(item)
+
+    def _stop_io(self) -> None:
+        if self._io is not None:
+            self._queue.put(None)
+            self._io.join()
+            self._io = None
+
+    def set_metadata(self, key: str, value: str) -> None:
+        """Store a string in metadata.yaml's custom_data (written at close)."""
+        self._writer.set_custom_data(key, value)
+
+    def close(self) -> None:
+        """Write everything queued, the MCAP summary and metadata.yaml."""
+        self._stop_io()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+        if self._io_error is not None:
+            self._writer.abort()
+            raise RecordingError(
+                "recording failed",
+                str(self.path),
+                f"{type(self._io_error).__name__}: {self._io_error}",
+                "check free disk space",
+            ) from self._io_error
+        self._writer.close()
+
+    def abort(self) -> None:
+        """Stop without finishing the file (recover() can rebuild its index later)."""
+        self._stop_io()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        self._flush_chunk()
+        self._writer.abort()
+
+    # -------------------------------------------------------------------------------- writing
+    def write(self, topic: Topic, stamp_ns: int, msg: Any) -> None:
+        """Queue a message object (serialized now)."""
+        data = self._store.serialize_cdr(msg, topic.msgtype)
+        self._put((topic, int(stamp_ns), _Done(bytes(data))))
+
+    def run_async(self, fn: Callable[..., Any], *args: Any) -> Future[Any] | _Done:
+        """Run ``fn(*args)`` on a worker thread (inline without workers); returns its future."""
+        if self._pool is None:
+            return _Done(fn(*args))
+        return self._pool.submit(fn, *args)
+
+    def submit(self, topic: Topic, stamp_ns: int, build: Callable[[], Any]) -> None:
+        """Queue a message built by ``build()`` on a worker thread (encoding happens there)."""
+        msgtype = topic.msgtype
+
+        def job() -> bytes:
+            return bytes(self._store.serialize_cdr(build(), msgtype))
+
+        fut: Future[bytes] | _Done = self._pool.submit(job) if self._pool is not None else _Done(job())
+        self._put((topic, int(stamp_ns), fut))
+
+    def _write_serialized(self, topic: Topic, stamp_ns: int, data: bytes) -> None:
+        conn = self._connections.get(topic.name)
+        if conn is None:
+            conn = self._writer.add_connection(topic.name, topic.msgtype, typestore=self._store)
+            self._connections[topic.name] = conn
+        self._writer.write(conn, stamp_ns, data)
+        self.message_counts[topic.name] = self.message_counts.get(topic.name, 0) + 1
+        self.byte_counts[topic.name] = self.byte_counts.get(topic.name, 0) + len(data)
+        if self._last_flush_ns is None:
+            self._last_flush_ns = stamp_ns
+        elif stamp_ns - self._last_flush_ns >= self.flush_period_ns:
+            self._flush_chunk()
+            self._last_flush_ns = stamp_ns
+
+    def _flush_chunk(self) -> None:
+        """Close the pending MCAP chunk and hand it to the OS (rosbags' storage internals)."""
+        storage = getattr(self._writer, "storage", None)
+        if storage is None:
+            return
+        if storage.chunk.bio.tell():
+            storage.close_chunk()
+        storage.bio.flush()
+        if self.fsync:
+            os.fsync(storage.bio.fileno())
+        self.flushes += 1
+
+
+class NullWriter(RecordingWriter):
+    """Accepts everything and writes nothing (``recording.enabled=false``: benchmarks, dry runs)."""
+
+    def __init__(self) -> None:
+        self.message_counts, self.byte_counts, self.flushes = {}, {}, 0
+
+    def __enter__(self) -> NullWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+    def set_metadata(self, key: str, value: str) -> None:
+        return None
+
+    def write(self, topic: Topic, stamp_ns: int, msg: Any) -> None:
+        return None
+
+    def run_async(self, fn: Callable[..., Any], *args: Any) -> _Done:
+        return _Done(None)
+
+    def submit(self, topic: Topic, stamp_ns: int, build: Callable[[], Any]) -> None:
+        return None
