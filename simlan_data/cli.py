@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import sys
 from collections.abc import Callable
 from typing import NoReturn, TextIO
@@ -11,6 +12,7 @@ from typing import NoReturn, TextIO
 from hydra.errors import HydraException
 from omegaconf.errors import OmegaConfBaseException
 
+from .constants import CONF_DIR
 from .errors import EXIT_BAD_INPUT, EXIT_FAILED_RUN, SimlanError
 
 log = logging.getLogger("simlan_data")
@@ -48,6 +50,15 @@ class _StderrWithoutHydraJobError:
         return getattr(self._stream, name)
 
 
+def _group_options(message: str) -> str:
+    """For "Could not find 'group/option'": the options that do exist."""
+    m = re.search(r"Could not find '([^'/]+)/[^']*'", message)
+    if not m:
+        return ""
+    options = sorted(p.stem for p in (CONF_DIR / m.group(1)).glob("*.yaml"))
+    return f" (options: {', '.join(options)})" if options else ""
+
+
 def fail(message: str, code: int) -> NoReturn:
     sys.stderr.write(f"error: {message}\n")
     sys.stderr.flush()
@@ -80,7 +91,7 @@ def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
         if ours is not None:
             fail(ours.line(), ours.exit_code)
         if isinstance(err, (HydraException, OmegaConfBaseException)):
-            msg = _first_line(str(err))
+            msg = _first_line(str(err)) + _group_options(str(err))
             cause = err.__cause__
             if cause is not None and _first_line(str(cause)) and _first_line(str(cause)) not in msg:
                 msg += f": {_first_line(str(cause))}"

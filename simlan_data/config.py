@@ -53,11 +53,14 @@ def _choice(field_name: str, value: str, choices: tuple[str, ...]) -> None:
 def _divides(field_name: str, rate_hz: float, physics_hz: int) -> None:
     steps = physics_hz / rate_hz
     if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
+        whole = [d for d in range(1, physics_hz + 1) if physics_hz % d == 0]
+        below = max((d for d in whole if d < rate_hz), default=whole[0])
+        above = min((d for d in whole if d > rate_hz), default=whole[-1])
         raise _bad(
             field_name,
             rate_hz,
-            f"the simulation steps at world.physics_hz={physics_hz}, and {rate_hz} Hz is not a whole number of steps",
-            f"use a rate that divides {physics_hz}, e.g. {physics_hz / max(1, round(steps))}",
+            f"the simulation steps at world.physics_hz={physics_hz}; a rate must be a whole number of steps",
+            f"use a divisor of {physics_hz}, e.g. {below} or {above}",
         )
 
 
@@ -189,11 +192,19 @@ class RenderConfig:
 
     backend: str = "auto"
     layered: bool = True
+    software_gl_threads: int = 1
 
     def __post_init__(self) -> None:
         if _incomplete(self):
             return
         _choice("render.backend", self.backend, RENDER_BACKENDS)
+        if not 0 <= self.software_gl_threads <= 64:
+            raise _bad(
+                "render.software_gl_threads",
+                self.software_gl_threads,
+                "must be within 0..64 (0: Mesa's default)",
+                "use 1",
+            )
 
 
 @dataclass
@@ -209,6 +220,7 @@ class RecordingConfig:
     semantic_rate_hz: float = 1.0
     ground_truth_rate_hz: float = 60.0
     compression: str = "zstd"
+    compression_level: int = 2
     flush_period_s: float = 1.0
     encode_threads: int = 2
 
@@ -219,6 +231,10 @@ class RecordingConfig:
         _choice("recording.depth_encoding", self.depth_encoding, DEPTH_ENCODINGS)
         _choice("recording.semantic_encoding", self.semantic_encoding, SEMANTIC_ENCODINGS)
         _choice("recording.compression", self.compression, CHUNK_COMPRESSIONS)
+        if not -7 <= self.compression_level <= 22:
+            raise _bad(
+                "recording.compression_level", self.compression_level, "zstd levels are -7..22", "use 1"
+            )
         if not 1 <= self.jpeg_quality <= 100:
             raise _bad("recording.jpeg_quality", self.jpeg_quality, "must be within 1..100", "use 90")
         if not 50 <= self.ground_truth_rate_hz <= 1000:

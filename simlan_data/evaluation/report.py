@@ -99,6 +99,10 @@ def write_report(
         lines += ["## Calibration notes", "", "Fields that disagree with K, R, t (K, R, t are used):", ""]
         lines += [f"- {issue}" for issue in stats.calibration_issues]
         lines.append("")
+    if stats.layout_notes:
+        lines += ["## Layout notes", "", "Where SIMLAN's layout and this twin's geometry disagree:", ""]
+        lines += [f"- {note}" for note in stats.layout_notes]
+        lines.append("")
     path = run_dir / REPORT_FILENAME
     path.write_text("\n".join(lines))
     return path

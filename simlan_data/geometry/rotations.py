@@ -13,8 +13,22 @@ FloatArray = NDArray[np.float64]
 
 
 def matrix_from_quat(quat_xyzw: ArrayLike) -> FloatArray:
-    """Return the 3x3 rotation matrix of a unit quaternion (x, y, z, w)."""
-    return Rotation.from_quat(np.asarray(quat_xyzw, dtype=float)).as_matrix()
+    """Return the 3x3 rotation matrix of a unit quaternion (x, y, z, w) (or (N, 3, 3) of (N, 4)).
+
+    A single quaternion takes the closed form (scipy's per-call overhead dominates the simulation
+    loop otherwise); batches go through scipy. Tests check both agree.
+    """
+    q = np.asarray(quat_xyzw, dtype=float)
+    if q.shape != (4,):
+        return Rotation.from_quat(q).as_matrix()
+    x, y, z, w = q / np.sqrt(q @ q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def quat_from_matrix(matrix: ArrayLike) -> FloatArray:

@@ -5,7 +5,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -19,6 +19,8 @@ class Transform:
 
     rotation: FloatArray
     translation: FloatArray
+    # the quaternion it was made from, if any (saves a matrix -> quaternion conversion)
+    quat_xyzw: FloatArray | None = field(default=None, compare=False, repr=False)
 
     @staticmethod
     def identity() -> Transform:
@@ -26,7 +28,11 @@ class Transform:
 
     @staticmethod
     def from_quat(translation: ArrayLike, quat_xyzw: ArrayLike) -> Transform:
-        return Transform(matrix_from_quat(quat_xyzw), np.asarray(translation, dtype=float).copy())
+        q = np.asarray(quat_xyzw, dtype=float)
+        q = q / np.sqrt(q @ q)
+        return Transform(
+            matrix_from_quat(q), np.asarray(translation, dtype=float).copy(), -q if q[3] < 0 else q
+        )
 
     @staticmethod
     def from_xyz_rpy(xyz: ArrayLike, rpy: ArrayLike) -> Transform:
@@ -50,7 +56,8 @@ class Transform:
         return out
 
     def quat(self) -> FloatArray:
-        return quat_from_matrix(self.rotation)
+        """Quaternion (x, y, z, w) with w >= 0."""
+        return self.quat_xyzw if self.quat_xyzw is not None else quat_from_matrix(self.rotation)
 
     def yaw(self) -> float:
         return yaw_from_matrix(self.rotation)

@@ -23,9 +23,16 @@ DEPTH_FORMAT = "16UC1; compressedDepth png"
 LABELS_FORMAT = "mono8; png compressed mono8"
 DEPTH_HEADER = struct.Struct("<iff")  # compressionFormat (INV_DEPTH = 0), depthParam[2]
 DEPTH_MAX_M = 65.535
-# measured on rendered warehouse frames (BENCHMARKS.md): zlib level 1 with the "up" filter is the
-# fastest PNG setting at no cost in size (depth 10.6 ms / 237 KiB; adaptive filters 14.4 ms / 237 KiB)
-PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP]
+# Measured on rendered warehouse frames (BENCHMARKS.md): the "up" filter is the fastest PNG filter
+# at no cost in size (depth 11.4 ms and 237 KiB against 14.4 ms for adaptive filters). Storing
+# PNGs uncompressed and leaving compression to the bag's zstd chunks is smaller (217 KiB) but
+# makes every unchanged frame cost compression again: slower overall in a run.
+PNG_FILTER = [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP]
+
+
+def png_params(level: int) -> list[int]:
+    return [cv2.IMWRITE_PNG_COMPRESSION, level, *PNG_FILTER]
+
 
 MAX_DECODED_PIXELS = 8192 * 8192  # refuse decoding absurd images from untrusted recordings
 
@@ -37,7 +44,7 @@ def encode_rgb(rgb: NDArray[np.uint8], encoding: str, *, jpeg_quality: int = 90)
         ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
         fmt = JPEG_FORMAT
     elif encoding == "png":
-        ok, buf = cv2.imencode(".png", bgr, PNG_PARAMS)
+        ok, buf = cv2.imencode(".png", bgr, png_params(1))
         fmt = PNG_RGB_FORMAT
     else:
         raise ValueError(f"not a compressed colour encoding: {encoding!r}")
@@ -52,16 +59,16 @@ def depth_to_mm(depth_m: NDArray[np.float32]) -> NDArray[np.uint16]:
     return mm.astype(np.uint16)
 
 
-def encode_depth(depth_m: NDArray[np.float32]) -> tuple[str, bytes]:
+def encode_depth(depth_m: NDArray[np.float32], *, zlib_level: int = 1) -> tuple[str, bytes]:
     """Encode metric depth as compressed_depth_image_transport's 16UC1 PNG."""
-    ok, buf = cv2.imencode(".png", depth_to_mm(depth_m), PNG_PARAMS)
+    ok, buf = cv2.imencode(".png", depth_to_mm(depth_m), png_params(zlib_level))
     if not ok:  # pragma: no cover
         raise ValueError("OpenCV could not encode the depth image")
     return DEPTH_FORMAT, DEPTH_HEADER.pack(0, 0.0, 0.0) + buf.tobytes()
 
 
-def encode_labels(labels: NDArray[np.uint8]) -> tuple[str, bytes]:
-    ok, buf = cv2.imencode(".png", labels, PNG_PARAMS)
+def encode_labels(labels: NDArray[np.uint8], *, zlib_level: int = 1) -> tuple[str, bytes]:
+    ok, buf = cv2.imencode(".png", labels, png_params(zlib_level))
     if not ok:  # pragma: no cover
         raise ValueError("OpenCV could not encode the label image")
     return LABELS_FORMAT, buf.tobytes()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -44,6 +45,22 @@ def time_msg(stamp_ns: int) -> Any:
 
 def stamp_ns_of(time: Any) -> int:
     return int(time.sec) * NS_PER_S + int(time.nanosec)
+
+
+_CDR_LE = b"\x00\x01\x00\x00"
+_STAMP = struct.Struct("<iI")
+
+
+def restamp(cdr: bytes, stamp_ns: int) -> bytes:
+    """The same serialized message with another header stamp.
+
+    For types whose first field is a std_msgs/Header (images, camera info): in little-endian CDR
+    the stamp's sec and nanosec sit right after the 4-byte encapsulation header.
+    """
+    if cdr[:4] != _CDR_LE:
+        raise ValueError("not little-endian CDR")
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    return b"".join((cdr[:4], _STAMP.pack(sec, nanosec), cdr[12:]))
 
 
 def header(stamp_ns: int, frame_id: str) -> Any:

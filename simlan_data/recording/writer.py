@@ -11,14 +11,20 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import queue
+import sys
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+if sys.version_info >= (3, 14):
+    from compression import zstd
+else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
+    from backports import zstd
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.errors import WriterError
@@ -53,6 +59,7 @@ class RecordingWriter:
         path: Path | str,
         *,
         compression: str = "zstd",
+        compression_level: int = 2,
         flush_period_ns: int = NS_PER_S,
         encode_threads: int = 0,
         fsync: bool = False,
@@ -68,6 +75,7 @@ class RecordingWriter:
         self.flush_period_ns = int(flush_period_ns)
         self.fsync = fsync
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.compression_level = int(compression_level)
         if compression == "zstd":
             self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self._store = typestore()
@@ -109,6 +117,11 @@ class RecordingWriter:
                 str(err),
                 "check the directory is writable and does not exist",
             ) from err
+        storage = self._writer.storage
+        if getattr(storage, "compression", "") == "zstd":
+            # rosbags compresses chunks at zstd's default level 3; level 2 is about twice as fast
+            # for the same size on our chunks (measured: ratio 0.863 vs 0.862, 500 vs 270 MB/s)
+            storage.compressor = functools.partial(zstd.compress, level=self.compression_level)
         if self._pool is not None:
             self._io = threading.Thread(target=self._io_loop, name="bag-writer", daemon=True)
             self._io.start()
@@ -179,14 +192,25 @@ class RecordingWriter:
         data = self._store.serialize_cdr(msg, topic.msgtype)
         self._put((topic, int(stamp_ns), _Done(bytes(data))))
 
+    def write_serialized(self, topic: Topic, stamp_ns: int, data: bytes) -> None:
+        """Queue an already serialized (CDR) message."""
+        self._put((topic, int(stamp_ns), _Done(data)))
+
+    def write_pending(self, topic: Topic, stamp_ns: int, pending: Any) -> None:
+        """Queue a message whose CDR bytes ``pending.result()`` yields once ``pending.done()``."""
+        self._put((topic, int(stamp_ns), pending))
+
     def run_async(self, fn: Callable[..., Any], *args: Any) -> Future[Any] | _Done:
         """Run ``fn(*args)`` on a worker thread (inline without workers); returns its future."""
         if self._pool is None:
             return _Done(fn(*args))
         return self._pool.submit(fn, *args)
 
-    def submit(self, topic: Topic, stamp_ns: int, build: Callable[[], Any]) -> None:
-        """Queue a message built by ``build()`` on a worker thread (encoding happens there)."""
+    def submit(self, topic: Topic, stamp_ns: int, build: Callable[[], Any]) -> Future[bytes] | _Done:
+        """Queue a message built by ``build()`` on a worker thread (encoding happens there).
+
+        Returns the future of its CDR bytes (to reuse them for an identical later message).
+        """
         msgtype = topic.msgtype
 
         def job() -> bytes:
@@ -194,6 +218,10 @@ class RecordingWriter:
 
         fut: Future[bytes] | _Done = self._pool.submit(job) if self._pool is not None else _Done(job())
         self._put((topic, int(stamp_ns), fut))
+        return fut
+
+    def serialize(self, topic: Topic, msg: Any) -> bytes:
+        return bytes(self._store.serialize_cdr(msg, topic.msgtype))
 
     def _write_serialized(self, topic: Topic, stamp_ns: int, data: bytes) -> None:
         conn = self._connections.get(topic.name)
@@ -240,8 +268,17 @@ class NullWriter(RecordingWriter):
     def write(self, topic: Topic, stamp_ns: int, msg: Any) -> None:
         return None
 
+    def write_serialized(self, topic: Topic, stamp_ns: int, data: bytes) -> None:
+        return None
+
+    def write_pending(self, topic: Topic, stamp_ns: int, pending: Any) -> None:
+        return None
+
+    def serialize(self, topic: Topic, msg: Any) -> bytes:
+        return b"\x00\x01\x00\x00" + bytes(8)  # an empty little-endian CDR header
+
     def run_async(self, fn: Callable[..., Any], *args: Any) -> _Done:
         return _Done(None)
 
-    def submit(self, topic: Topic, stamp_ns: int, build: Callable[[], Any]) -> None:
-        return None
+    def submit(self, topic: Topic, stamp_ns: int, build: Callable[[], Any]) -> _Done:
+        return _Done(b"")

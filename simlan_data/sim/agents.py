@@ -138,13 +138,15 @@ class DiffDriveAgent:
         # base_link frame vs. PyBullet's base (centre of mass) frame
         info = pb.getDynamicsInfo(self.body, -1, physicsClientId=client)
         self._com_in_link = Transform.from_quat(info[3], info[4])
+        self._link_in_com = pb.invertTransform(info[3], info[4])
         self.command = (0.0, 0.0)
 
     # ----------------------------------------------------------------------------- state
     def pose(self) -> Transform:
         """Ground-truth map -> base_link."""
         pos, orn = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-        return Transform.from_quat(pos, orn) @ self._com_in_link.inverse()
+        pos, orn = pb.multiplyTransforms(pos, orn, *self._link_in_com)
+        return Transform.from_quat(pos, orn)
 
     def twist(self) -> tuple[float, float]:
         """Ground-truth forward speed (m/s, base_link x) and yaw rate (rad/s)."""

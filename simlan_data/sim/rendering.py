@@ -114,6 +114,9 @@ class CameraRenderer:
         self.client, self.camera, self.labels = client, camera, labels
         self.distort, self.near_m, self.far_m, self.layered = distort, near_m, far_m, layered
         self._view = camera.opengl_view()
+        # TinyRenderer samples pixel centres half a pixel off OpenGL's convention (measured:
+        # +0.5 px in u, -0.5 px in v); shifting the principal point puts them back
+        self._tiny_shift = (0.5, -0.5) if client.backend == "tiny" else (0.0, 0.0)
         self._setup_canvas()
         self._static: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._canvas: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -194,8 +197,8 @@ class CameraRenderer:
             for tu in range(u0, u1, tw):
                 w, h = min(tw, u1 - tu), min(th, v1 - tv)
                 K = self.canvas_K.copy()
-                K[0, 2] -= tu
-                K[1, 2] -= tv
+                K[0, 2] -= tu + self._tiny_shift[0]
+                K[1, 2] -= tv + self._tiny_shift[1]
                 proj = opengl_projection(K, w, h, near_m=self.near_m, far_m=self.far_m)
                 if self.client.backend == "egl":
                     _, _, c, d, s = pb.getCameraImage(

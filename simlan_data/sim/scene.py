@@ -131,7 +131,7 @@ class Scene:
 
     @staticmethod
     def build(cfg: Config, inputs: Inputs) -> Scene:
-        client = connect(cfg.render.backend)
+        client = connect(cfg.render.backend, software_gl_threads=cfg.render.software_gl_threads)
         try:
             return Scene._build(cfg, inputs, client)
         except BaseException:
@@ -150,7 +150,7 @@ class Scene:
         if world.skipped_models:
             log.info("layout models without geometry in this twin: %s", world.skipped_models)
         for conflict in world.layout_conflicts:
-            log.info("layout: %s", conflict)
+            log.debug("layout: %s", conflict)
         # let movable objects settle (SIMLAN's poses leave gaps and small overlaps) before the
         # cameras bake their static layers
         for _ in range(round(cfg.world.settle_s * cfg.world.physics_hz)):

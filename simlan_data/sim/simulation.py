@@ -16,7 +16,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any
 
 from .. import __version__
 from .._pybullet import pb
@@ -26,9 +25,9 @@ from ..geometry.transforms import Transform
 from ..gpss.follower import FollowerParams, WaypointFollower
 from ..recording import messages as M
 from ..recording import schema
-from ..recording.codecs import encode_depth, encode_labels, encode_rgb
 from ..recording.writer import NullWriter, RecordingWriter
 from ..world.labels import SEMANTIC_CLASSES
+from .camera_recording import CameraRecorder
 from .scene import Inputs, Scene
 
 DEPENDENCIES = (
@@ -72,6 +71,7 @@ class RunStats:
     message_counts: dict[str, int] = field(default_factory=dict)
     byte_counts: dict[str, int] = field(default_factory=dict)
     calibration_issues: list[str] = field(default_factory=list)
+    layout_notes: list[str] = field(default_factory=list)
     recording_bytes: int = 0
 
     def metrics(self) -> dict[str, float]:
@@ -119,6 +119,7 @@ class Simulation:
         stats = RunStats(calibration_issues=list(self.inputs.calibration_issues))
         scene = Scene.build(cfg, self.inputs)
         stats.renderer = scene.client.backend
+        stats.layout_notes = list(scene.world.layout_conflicts)
         try:
             writer = (
                 RecordingWriter(
@@ -164,8 +165,13 @@ class Simulation:
             stats.distance_m[ac.namespace] = 0.0
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
-        cam_topics = [self._camera_topics(c.camera_id) for c in scene.cameras]
-        encoded: dict[tuple[str, str], Any] = {}
+        recorder = CameraRecorder(
+            writer,
+            cfg.recording,
+            list(cfg.cameras.streams),
+            depth_every=self.depth_every,
+            semantic_every=self.semantic_every,
+        )
         ignore = scene.world.floor
         dt_control = self.control_every / self.physics_hz
         cid = scene.client.id
@@ -209,13 +215,11 @@ class Simulation:
                 render0 = time.perf_counter()
                 scene.refresh_static_layers()
                 aabbs = scene.agent_aabbs()
-                for renderer, topics in zip(scene.renderers, cam_topics):
+                for renderer in scene.renderers:
                     images = renderer.render(aabbs)
                     stats.camera_frames += 1
                     stats.camera_frames_changed += int(images.changed)
-                    self._record_frame(
-                        writer, t, step // self.camera_every, renderer.camera, images, topics, encoded
-                    )
+                    recorder.record(t, step // self.camera_every, renderer.camera, images)
                 stats.render_wall_s += time.perf_counter() - render0
                 if progress is not None:
                     progress(t / NS_PER_S)
@@ -223,58 +227,6 @@ class Simulation:
                 pb.stepSimulation(physicsClientId=cid)
                 stats.physics_steps += 1
         stats.sim_duration_ns = self.stamp_ns(self.steps)
-
-    def _camera_topics(self, camera_id: str) -> dict[str, schema.Topic]:
-        rec, streams = self.cfg.recording, self.cfg.cameras.streams
-        return schema.camera_topics(
-            camera_id,
-            rgb=rec.rgb_encoding,
-            depth=rec.depth_encoding if "depth" in streams else None,
-            semantic=rec.semantic_encoding if "semantic" in streams else None,
-        )
-
-    def _record_frame(
-        self,
-        writer: RecordingWriter,
-        t: int,
-        frame_index: int,
-        camera: Any,
-        images: Any,
-        topics: dict[str, schema.Topic],
-        cache: dict,
-    ) -> None:
-        """Queue a camera frame; an image unchanged since it was last encoded reuses those bytes."""
-        rec, frame = self.cfg.recording, camera.frame_id
-        writer.write(topics["camera_info"], t, M.camera_info(t, camera))
-        version = cache.setdefault(("version", camera.camera_id), 0) + int(images.changed)
-        cache[("version", camera.camera_id)] = version
-        jobs: list[tuple[str, Any, Callable[[Any], tuple[str, bytes]] | None]] = [
-            (
-                "rgb",
-                images.rgb,
-                None
-                if rec.rgb_encoding == "raw"
-                else (lambda a: encode_rgb(a, rec.rgb_encoding, jpeg_quality=rec.jpeg_quality)),
-            ),
-        ]
-        if "depth" in topics and frame_index % self.depth_every == 0:
-            jobs.append(("depth", images.depth_m, None if rec.depth_encoding == "raw" else encode_depth))
-        if "semantic" in topics and frame_index % self.semantic_every == 0:
-            jobs.append(
-                ("semantic", images.labels, None if rec.semantic_encoding == "raw" else encode_labels)
-            )
-        for stream, array, encode in jobs:
-            topic = topics[stream]
-            if encode is None:
-                writer.submit(topic, t, lambda a=array: M.raw_image(t, frame, a))
-                continue
-            key = (camera.camera_id, stream)
-            cached = cache.get(key)
-            fut = (
-                cached[1] if cached is not None and cached[0] == version else writer.run_async(encode, array)
-            )
-            cache[key] = (version, fut)
-            writer.submit(topic, t, lambda f=fut: M.compressed_image(t, frame, *f.result()))
 
     def _publish_static(self, scene: Scene, writer: RecordingWriter) -> None:
         cfg = self.cfg

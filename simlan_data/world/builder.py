@@ -221,8 +221,9 @@ def build_world(
             continue
         params = physics.get(spec.physics, PhysicsParams())
         dynamic = spec.movable and not pl.static and params.mass_kg > 0
-        x, y, z = pl.xyz_m
-        position, orientation = (x, y, z + spec.z_offset_m), quat_from_rpy(*pl.rpy_rad)
+        x, y, z = (0.0, 0.0, 0.0) if spec.world_frame else pl.xyz_m
+        rpy = (0.0, 0.0, 0.0) if spec.world_frame else pl.rpy_rad
+        position, orientation = (x, y, z + spec.z_offset_m), quat_from_rpy(*rpy)
         if dynamic:
             body = create_body(
                 client, spec.parts, position=position, orientation=orientation, mass_kg=params.mass_kg

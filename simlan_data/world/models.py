@@ -66,6 +66,9 @@ class ModelSpec:
     movable: bool = False
     # layout z of SIMLAN's origin is not the bottom for boxes: shift the whole model by this much
     z_offset_m: float = 0.0
+    # parts are given in world coordinates (the building shell and floor, whose measured extents
+    # are known in the world while SIMLAN's model origin is not)
+    world_frame: bool = False
     extra: dict[str, float] = field(default_factory=dict)
 
 
@@ -256,7 +259,10 @@ def _generic(hx: float, hy: float, hz: float, rgba: Rgba) -> tuple[Part, ...]:
 
 
 MODEL_SPECS: dict[str, ModelSpec] = {
-    "ground_plane": ModelSpec("floor", "floor", floor_parts((-20.0, 40.0), (-40.0, 20.0), slabs=False)),
+    # Gazebo's infinite ground plane: a plain floor under the whole site
+    "ground_plane": ModelSpec(
+        "floor", "floor", floor_parts((-35.0, 50.0), (-45.0, 30.0), slabs=False), world_frame=True
+    ),
     "ground_collision": ModelSpec("floor", "floor", ()),
     "ground_visual_updated": ModelSpec(
         "floor",
@@ -277,7 +283,7 @@ MODEL_SPECS: dict[str, ModelSpec] = {
     "concrete_ground": ModelSpec(
         "floor", "floor", (_box(10.0, 5.0, 0.004, z=0.004, rgba=(0.50, 0.50, 0.49, 1.0), collide=False),)
     ),
-    "factory": ModelSpec("wall", "structure", wall_parts()),
+    "factory": ModelSpec("wall", "structure", wall_parts(), world_frame=True),
     "shelf": ModelSpec("shelf", "shelf", shelf_parts()),
     # SIMLAN's box origin is 0.4 m above its bottom (boxes at z 0.4 / 1.4 stand on the floor / 1 m deck)
     "box_1185x785x1010": ModelSpec("box", "box", box_parts(), movable=True, z_offset_m=-0.4),

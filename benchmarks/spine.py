@@ -1,0 +1,209 @@
+"""Benchmark of "the spine" (issue 2): renderer speed, encodings, the default run, recording cost.
+
+    python benchmarks/spine.py [--quick]
+
+Prints markdown for BENCHMARKS.md. Every figure comes from this one run, baselines beside them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import best_of, machine, run_cli, table
+from simlan_data._pybullet import pb
+from simlan_data.geometry.calibration import load_calibration
+from simlan_data.recording.codecs import encode_depth, encode_labels, encode_rgb
+from simlan_data.sim.agents import AGENT_TYPES, DiffDriveAgent
+from simlan_data.sim.pybullet_client import connect
+from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.world.builder import build_world
+from simlan_data.world.layout import load_layout
+
+CAMERAS = [str(c) for c in range(160, 171)]
+
+
+def _world(backend: str):
+    client = connect(backend)
+    with tempfile.TemporaryDirectory() as tmp:
+        world = build_world(client.id, load_layout("warehouse_layout.csv", "default"), {}, mesh_dir=Path(tmp))
+    labels = LabelTable()
+    for body, label in world.labels.items():
+        labels.set(body, label)
+    return client, labels
+
+
+def renderer_speed(frames: int) -> tuple[str, dict]:
+    """Frames per second per camera, RGB + depth + segmentation, 960x540 distorted, full warehouse."""
+    rows, raw = [], {}
+    for backend in ("egl", "tiny"):
+        client, labels = _world(backend)
+        cams = [load_calibration(c).camera.scaled(960, 540) for c in ("161", "163", "165")]
+        full = [CameraRenderer(client, c, labels, layered=False) for c in cams]
+        t_full = best_of(lambda full=full: [r.render() for r in full for _ in range(frames)], 1) / (
+            frames * len(full)
+        )
+        entry = {"full_ms": t_full * 1e3}
+        if backend == "egl":
+            layered = [CameraRenderer(client, c, labels, layered=True) for c in cams]
+            for r in layered:
+                r.render_static()
+            agent = DiffDriveAgent(
+                client.id, "robot_agent_1", AGENT_TYPES["pallet_truck"], pose=[-2.0, 0.4, 0.0], marker_id=1
+            )
+            labels.set(agent.body, agent.label)
+            agent.apply_command(1.0, 0.1)
+            t0 = time.perf_counter()
+            n = 0
+            for _ in range(frames):
+                for _ in range(48):
+                    pb.stepSimulation(physicsClientId=client.id)
+                for r in layered:
+                    r.render(agent.aabbs())
+                    n += 1
+            entry["layered_ms"] = (time.perf_counter() - t0) / n * 1e3
+        client.disconnect()
+        raw[backend] = entry
+        rows.append(
+            [
+                backend.upper() if backend == "egl" else "TinyRenderer",
+                f"{1e3 / entry['full_ms']:.1f}",
+                f"{entry['full_ms']:.0f}",
+                f"{1e3 / entry['layered_ms']:.0f} ({entry['layered_ms']:.1f} ms)"
+                if "layered_ms" in entry
+                else "n/a",
+            ]
+        )
+    md = table(
+        [
+            "renderer",
+            "full render, frames/s per camera",
+            "ms/frame",
+            "layered, moving truck in view: frames/s (ms)",
+        ],
+        rows,
+    )
+    return md, raw
+
+
+def encodings(frames: int) -> tuple[str, dict]:
+    """Bytes per camera-minute (5 Hz) and encode time per stream and encoding, on rendered frames."""
+    client, labels = _world("egl")
+    images = []
+    for cid in CAMERAS:
+        r = CameraRenderer(client, load_calibration(cid).camera.scaled(960, 540), labels, layered=False)
+        images.append(r.render())
+    client.disconnect()
+    cases = {
+        ("rgb", "jpeg q85 (default)"): lambda im: encode_rgb(im.rgb, "jpeg", jpeg_quality=85)[1],
+        ("rgb", "jpeg q95"): lambda im: encode_rgb(im.rgb, "jpeg", jpeg_quality=95)[1],
+        ("rgb", "png"): lambda im: encode_rgb(im.rgb, "png")[1],
+        ("rgb", "raw rgb8"): lambda im: im.rgb.tobytes(),
+        ("depth", "png 16UC1 mm (default)"): lambda im: encode_depth(im.depth_m)[1],
+        ("depth", "raw 32FC1"): lambda im: im.depth_m.tobytes(),
+        ("semantic", "png mono8 (default)"): lambda im: encode_labels(im.labels)[1],
+        ("semantic", "raw mono8"): lambda im: im.labels.tobytes(),
+    }
+    rows, raw = [], {}
+    for (stream, name), fn in cases.items():
+        fn(images[0])  # warm-up
+        t0 = time.perf_counter()
+        sizes = [len(fn(im)) for im in images for _ in range(frames)]
+        ms = (time.perf_counter() - t0) / len(sizes) * 1e3
+        kib = float(np.mean(sizes)) / 1024
+        raw[f"{stream}/{name}"] = {"kib_per_frame": kib, "ms_per_frame": ms}
+        rows.append([stream, name, f"{kib:.1f}", f"{kib * 300 / 1024:.1f}", f"{ms:.2f}"])
+    return table(
+        ["stream", "encoding", "KiB/frame", "MiB per camera-minute at 5 Hz", "encode ms/frame"], rows
+    ), raw
+
+
+def default_run(out_dir: Path, repeat: int) -> tuple[str, dict]:
+    """The default scenario end to end, with recording and without (the baseline), interleaved,
+    ``repeat`` times each; medians reported."""
+    runs: dict[str, list[dict]] = {"recording on (default)": [], "recording off (baseline)": []}
+    for i in range(repeat):
+        for label, extra in (
+            ("recording on (default)", []),
+            ("recording off (baseline)", ["recording.enabled=false"]),
+        ):
+            run_dir = out_dir / f"{label.split()[1]}_{i}"
+            t0 = time.perf_counter()
+            proc = run_cli(f"hydra.run.dir={run_dir}", "progress=false", *extra)
+            total = time.perf_counter() - t0
+            if proc.returncode != 0:
+                raise SystemExit(proc.stderr)
+            m = json.loads((run_dir / "metrics.json").read_text())
+            m["process_s"] = total
+            runs[label].append(m)
+    med = {label: {k: float(np.median([r[k] for r in rs])) for k in rs[0]} for label, rs in runs.items()}
+    on, off = med["recording on (default)"], med["recording off (baseline)"]
+    overhead = (on["sim.wall_s"] - off["sim.wall_s"]) / on["sim.wall_s"]
+    rows = [
+        [
+            k,
+            f"{v['sim.duration_s']:.0f}",
+            f"{v['sim.wall_s']:.1f} ({', '.join(format(r['sim.wall_s'], '.1f') for r in runs[k])})",
+            f"{v['sim.rtf']:.2f}",
+            f"{v['process_s']:.1f}",
+            f"{v['recording.bytes'] / 2**20:.0f}" if v["recording.bytes"] else "-",
+            f"{int(v['sim.camera_frames'])}",
+        ]
+        for k, v in med.items()
+    ]
+    md = table(
+        [
+            f"run (median of {repeat})",
+            "simulated s",
+            "loop wall s (each run)",
+            "real-time factor",
+            "whole command s",
+            "recording MiB",
+            "camera frames",
+        ],
+        rows,
+    )
+    md += f"\n\nRecording overhead: {overhead * 100:.0f} % of the recorded run's loop time ((on - off) / on, medians)."
+    return md, {"runs": runs, "median": med, "overhead": overhead}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="fewer frames, no default run")
+    parser.add_argument("--json", type=Path, help="also write raw numbers here")
+    parser.add_argument("--repeat", type=int, default=3, help="default-run repetitions (medians)")
+    parser.add_argument("--only", choices=["renderers", "encodings", "default_run"], help="one section")
+    args = parser.parse_args()
+    frames = 3 if args.quick else 10
+    print(f"Machine: {machine()}\n")
+    sections = {}
+    if args.only in (None, "renderers"):
+        md, sections["renderers"] = renderer_speed(frames)
+        print(
+            "### Renderer speed (3 cameras, RGB + depth + segmentation, 960x540, distortion on, full warehouse)\n"
+        )
+        print(md + "\n")
+    if args.only in (None, "encodings"):
+        md, sections["encodings"] = encodings(2 if args.quick else 5)
+        print(
+            "### Bytes and encode time per stream (11 cameras 160-170, frames of the full warehouse, no agent)\n"
+        )
+        print(md + "\n")
+    if not args.quick and args.only in (None, "default_run"):
+        with tempfile.TemporaryDirectory() as tmp:
+            md, sections["default_run"] = default_run(Path(tmp), args.repeat)
+        print("### Default scenario (python -m simlan_data.run)\n")
+        print(md + "\n")
+    if args.json:
+        args.json.write_text(json.dumps(sections, indent=2))
+
+
+if __name__ == "__main__":
+    main()

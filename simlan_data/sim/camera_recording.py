@@ -1,0 +1,108 @@
+"""Queue camera frames into the recording, reusing work for frames that did not change.
+
+Most cameras see no motion most of the time: their images are identical frame after frame. The
+first time an image version is recorded it is encoded and serialized on a worker thread; while it
+stays unchanged, later frames reuse those CDR bytes with a new header stamp (as do camera infos).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from ..config import RecordingConfig
+from ..geometry.camera import CameraModel
+from ..recording import messages as M
+from ..recording import schema
+from ..recording.codecs import encode_depth, encode_labels, encode_rgb
+from ..recording.writer import RecordingWriter
+from .rendering import CameraImages
+
+
+class _Restamped:
+    """Pending CDR bytes of an earlier message, stamped anew when they are written."""
+
+    __slots__ = ("_pending", "_stamp_ns")
+
+    def __init__(self, pending: Any, stamp_ns: int) -> None:
+        self._pending, self._stamp_ns = pending, stamp_ns
+
+    def done(self) -> bool:
+        return bool(self._pending.done())
+
+    def result(self) -> bytes:
+        return M.restamp(self._pending.result(), self._stamp_ns)
+
+
+class CameraRecorder:
+    """Turn rendered camera frames into image, depth, semantic and camera-info messages."""
+
+    def __init__(
+        self,
+        writer: RecordingWriter,
+        rec: RecordingConfig,
+        streams: list[str],
+        *,
+        depth_every: int,
+        semantic_every: int,
+    ) -> None:
+        self.writer, self.rec = writer, rec
+        self.depth_every, self.semantic_every = depth_every, semantic_every
+        self._streams = streams
+        self._topics: dict[str, dict[str, schema.Topic]] = {}
+        self._info: dict[str, bytes] = {}
+        self._version: dict[str, int] = {}
+        self._cache: dict[tuple[str, str], tuple[int, Any]] = {}
+        self.encoded = 0
+
+    def topics(self, camera_id: str) -> dict[str, schema.Topic]:
+        if camera_id not in self._topics:
+            rec = self.rec
+            self._topics[camera_id] = schema.camera_topics(
+                camera_id,
+                rgb=rec.rgb_encoding,
+                depth=rec.depth_encoding if "depth" in self._streams else None,
+                semantic=rec.semantic_encoding if "semantic" in self._streams else None,
+            )
+        return self._topics[camera_id]
+
+    def _encoder(self, stream: str) -> Callable[[Any], tuple[str, bytes]] | None:
+        rec = self.rec
+        if stream == "rgb":
+            return (
+                None
+                if rec.rgb_encoding == "raw"
+                else (lambda a: encode_rgb(a, rec.rgb_encoding, jpeg_quality=rec.jpeg_quality))
+            )
+        if stream == "depth":
+            return None if rec.depth_encoding == "raw" else encode_depth
+        return None if rec.semantic_encoding == "raw" else encode_labels
+
+    def record(self, t: int, frame_index: int, camera: CameraModel, images: CameraImages) -> None:
+        cid, frame = camera.camera_id, camera.frame_id
+        topics = self.topics(cid)
+        if cid not in self._info:
+            self._info[cid] = self.writer.serialize(topics["camera_info"], M.camera_info(0, camera))
+        self.writer.write_serialized(topics["camera_info"], t, M.restamp(self._info[cid], t))
+        version = self._version.get(cid, -1) + int(images.changed or cid not in self._version)
+        self._version[cid] = version
+        arrays = {"rgb": images.rgb}
+        if "depth" in topics and frame_index % self.depth_every == 0:
+            arrays["depth"] = images.depth_m
+        if "semantic" in topics and frame_index % self.semantic_every == 0:
+            arrays["semantic"] = images.labels
+        for stream, array in arrays.items():
+            topic, key = topics[stream], (cid, stream)
+            cached = self._cache.get(key)
+            if cached is not None and cached[0] == version:
+                self.writer.write_pending(topic, t, _Restamped(cached[1], t))
+                continue
+            encode = self._encoder(stream)
+            if encode is None:
+                pending = self.writer.submit(topic, t, lambda a=array, t=t: M.raw_image(t, frame, a))
+            else:
+                pending = self.writer.submit(
+                    topic, t, lambda a=array, t=t, enc=encode: M.compressed_image(t, frame, *enc(a))
+                )
+            self.encoded += 1
+            self._cache[key] = (version, pending)

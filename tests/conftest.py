@@ -1,0 +1,53 @@
+"""Shared fixtures: real PyBullet clients, one short real run read back by several tests."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from simlan_data.constants import CONF_DIR
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_cli(
+    *args: str, module: str = "simlan_data.run", timeout: float = 600, env: dict | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Run an entry point as users do; returns the completed process (text output)."""
+    full_env = {**os.environ, **(env or {})}
+    full_env.pop("HYDRA_FULL_ERROR", None)
+    return subprocess.run(
+        [sys.executable, "-m", module, *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=full_env,
+        cwd=REPO,
+    )
+
+
+def compose_config(*overrides: str):
+    """Compose the Hydra config as the app does, without a process (DictConfig)."""
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return compose("config", overrides=list(overrides))
+
+
+@pytest.fixture(scope="session")
+def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One real run of the default scenario, 3 s, all 11 cameras at 960x540, depth and semantic
+    every frame (so every stream is checked)."""
+    run_dir = tmp_path_factory.mktemp("runs") / "default_short"
+    proc = run_cli(
+        "duration_s=3",
+        f"hydra.run.dir={run_dir}",
+        "progress=false",
+        "recording.depth_rate_hz=5",
+        "recording.semantic_rate_hz=5",
+    )
+    assert proc.returncode == 0, proc.stderr
+    return run_dir

@@ -1,0 +1,99 @@
+"""Bad input: one clear error line, exit code 2, nothing written over an existing recording."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+import pytest
+
+from conftest import compose_config, run_cli
+from simlan_data.constants import CALIBRATION_DIR
+from simlan_data.errors import ConfigError
+from simlan_data.run import to_config
+from simlan_data.sim.scene import load_inputs
+
+
+def _one_error_line(stderr: str) -> str:
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, stderr
+    assert lines[0].startswith("error: "), stderr
+    return lines[0]
+
+
+@pytest.mark.parametrize(
+    ("overrides", "expected"),
+    [
+        (["cameras.ids=[160,999]"], "unknown camera id 999 in cameras.ids"),
+        (["duration_s=-5"], "invalid duration_s=-5.0"),
+        (["duration_s=abc"], "invalid configuration"),
+        (["no_such_key=1"], "invalid configuration"),
+        (["cameras=no_such_set"], "invalid configuration"),
+        (["world.fidelity=ultra"], "invalid world.fidelity='ultra'"),
+        (["agents.0.type=hovercraft"], "unknown agent type 'hovercraft'"),
+        (["agents.0.pose=[-13.0,4.0,0.0]"], "footprint overlaps"),
+        (["agents.0.pose=[100.0,0.0,0.0]"], "footprint leaves the building"),
+        (["cameras.rate_hz=7"], "invalid cameras.rate_hz=7.0"),
+    ],
+)
+def test_bad_config_gives_one_line_and_exit_2(tmp_path: Path, overrides: list[str], expected: str) -> None:
+    run_dir = tmp_path / "run"
+    proc = run_cli(*overrides, f"hydra.run.dir={run_dir}", "progress=false")
+    assert proc.returncode == 2, proc.stderr
+    line = _one_error_line(proc.stderr)
+    assert expected in line, line
+    assert not (run_dir / "recording").exists()
+
+
+def test_missing_calibration_file(tmp_path: Path) -> None:
+    calib = tmp_path / "calib"
+    for kind in ("intrinsic", "extrinsic"):
+        (calib / kind).mkdir(parents=True)
+        shutil.copy(CALIBRATION_DIR / kind / "163.yaml", calib / kind / "163.yaml")
+    shutil.copy(CALIBRATION_DIR / "intrinsic" / "164.yaml", calib / "intrinsic" / "164.yaml")
+    # 164 lacks its extrinsic file: not a usable camera
+    proc = run_cli(
+        "cameras.ids=[163,164]", f"cameras.calibration_dir={calib}", f"hydra.run.dir={tmp_path / 'run'}"
+    )
+    assert proc.returncode == 2
+    assert "unknown camera id 164" in _one_error_line(proc.stderr)
+    # a file that exists but is broken is named
+    (calib / "extrinsic" / "164.yaml").write_text("%YAML:1.0\n---\nrot_mat: 3\n")
+    proc = run_cli(
+        "cameras.ids=[163,164]", f"cameras.calibration_dir={calib}", f"hydra.run.dir={tmp_path / 'run2'}"
+    )
+    assert proc.returncode == 2
+    line = _one_error_line(proc.stderr)
+    assert "164.yaml" in line and "rot_mat" in line
+
+
+def test_existing_recording_is_never_touched(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    bag = run_dir / "recording"
+    bag.mkdir(parents=True)
+    (bag / "metadata.yaml").write_text("precious: true\n")
+    digest = hashlib.sha256((bag / "metadata.yaml").read_bytes()).hexdigest()
+    proc = run_cli("duration_s=1", "cameras=single", f"hydra.run.dir={run_dir}", "progress=false")
+    assert proc.returncode == 2
+    assert "recording exists" in _one_error_line(proc.stderr)
+    assert hashlib.sha256((bag / "metadata.yaml").read_bytes()).hexdigest() == digest
+    assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml"]
+
+
+def test_help_lists_groups_and_keys() -> None:
+    proc = run_cli("--help")
+    assert proc.returncode == 0
+    assert "cameras: gpss, gpss_all" in proc.stdout.replace("\n", " ") or "gpss_all" in proc.stdout
+    assert "duration_s" in proc.stdout and "world" in proc.stdout
+
+
+def test_config_checks_without_a_process() -> None:
+    cfg = to_config(compose_config("cameras=single", "duration_s=2"))
+    assert cfg.cameras.ids == [163] and cfg.agents[0].marker_id == 1
+    with pytest.raises(ConfigError, match=r"invalid agents\[\]\.namespace='truck_1'"):
+        to_config(compose_config("agents.0.namespace=truck_1"))
+    with pytest.raises(ConfigError, match=r"recording.depth_rate_hz=2.0 in config: must divide"):
+        to_config(compose_config("recording.depth_rate_hz=2"))
+    with pytest.raises(ConfigError, match=r"unknown camera id 777"):
+        load_inputs(to_config(compose_config("cameras.ids=[777]")))
