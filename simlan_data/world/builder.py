@@ -99,7 +99,9 @@ def create_body(
     if len(collide) > MAX_SHAPES_PER_ARRAY:  # pragma: no cover - specs are package data
         raise ValueError(f"a body can collide with at most {MAX_SHAPES_PER_ARRAY} parts, got {len(collide)}")
     col = -1
-    if collide:
+    if [p.shape for p in collide] == ["plane"]:
+        col = pb.createCollisionShape(pb.GEOM_PLANE, planeNormal=[0, 0, 1], physicsClientId=client)
+    elif collide:
         a = _shape_arrays(collide)
         col = pb.createCollisionShapeArray(
             shapeTypes=a["shapeTypes"],
