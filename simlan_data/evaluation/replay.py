@@ -1,0 +1,100 @@
+"""Replay a recording through algorithms without the simulator.
+
+A replay algorithm is a function ``(ReplayContext) -> dict[str, float]`` registered under a name
+in :data:`REPLAY_ALGORITHMS`; it reads what it needs from the recording, writes its artifacts into
+``context.out_dir`` and returns dotted metrics, which the CLI merges into ``<out>/metrics.json``.
+
+Cameras are rebuilt from the recording's own messages (``camera_info`` + ``/tf_static``), the same
+way the live run builds the models its algorithms use, so that a replay reproduces live outputs
+bit for bit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ..errors import RecordingInputError
+from ..geometry.camera import CameraModel
+from ..geometry.transforms import Transform
+from ..recording import schema
+from ..recording.reader import RecordingReader
+
+
+def camera_from_messages(info: Any, map_from_camera: Any, camera_id: str) -> CameraModel:
+    """A camera model from a sensor_msgs/CameraInfo and its geometry_msgs/Transform in ``map``."""
+    t, q = map_from_camera.translation, map_from_camera.rotation
+    world_from_camera = Transform.from_quat([t.x, t.y, t.z], [q.x, q.y, q.z, q.w])
+    K = np.asarray(info.k, dtype=np.float64).reshape(3, 3)
+    D = np.asarray(info.d, dtype=np.float64).reshape(-1)[:5]
+    return CameraModel(camera_id, int(info.width), int(info.height), K, D, world_from_camera.inverse())
+
+
+def cameras_in_recording(reader: RecordingReader) -> dict[str, CameraModel]:
+    """Every camera of a recording, from its first camera_info and the static transforms."""
+    tf_static = reader.first(schema.TF_STATIC)
+    if tf_static is None:
+        raise RecordingInputError(
+            "recording lacks /tf_static",
+            str(reader.path),
+            "camera poses are unknown",
+            "record with simlan_data >= 0.1",
+        )
+    frames = {t.child_frame_id: t.transform for t in tf_static.msg.transforms}
+    out: dict[str, CameraModel] = {}
+    for topic in sorted(reader.topics):
+        if not (topic.startswith("/camera_") and topic.endswith("/camera_info")):
+            continue
+        cid = topic.split("/")[1].removeprefix("camera_")
+        info = reader.first(topic)
+        frame = schema.camera_frame(cid)
+        if info is None or frame not in frames:
+            continue
+        out[cid] = camera_from_messages(info.msg, frames[frame], cid)
+    return out
+
+
+@dataclass
+class ReplayContext:
+    """What a replay algorithm gets: the open recording, where to write, options."""
+
+    reader: RecordingReader
+    out_dir: Path
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @cached_property
+    def config(self) -> dict[str, Any]:
+        """The run's resolved config as a plain dict (from /simlan/config)."""
+        msg = self.reader.first(schema.CONFIG)
+        if msg is None:
+            raise RecordingInputError(
+                "recording lacks /simlan/config",
+                str(self.reader.path),
+                "the run's config is unknown",
+                "record with simlan_data",
+            )
+        return yaml.safe_load(msg.msg.data)
+
+    @cached_property
+    def cameras(self) -> dict[str, CameraModel]:
+        return cameras_in_recording(self.reader)
+
+
+ReplayAlgorithm = Callable[[ReplayContext], dict[str, float]]
+REPLAY_ALGORITHMS: dict[str, ReplayAlgorithm] = {}
+
+
+def register(name: str) -> Callable[[ReplayAlgorithm], ReplayAlgorithm]:
+    """Decorator: make ``fn`` available as ``--algorithms name``."""
+
+    def deco(fn: ReplayAlgorithm) -> ReplayAlgorithm:
+        REPLAY_ALGORITHMS[name] = fn
+        return fn
+
+    return deco

@@ -1,0 +1,6 @@
+"""Import every module that registers a replay algorithm (``--algorithms`` choices)."""
+
+from __future__ import annotations
+
+# Each import registers with simlan_data.evaluation.replay.register(name). Add new ones here.
+from . import replay  # noqa: F401
