@@ -260,57 +260,58 @@ class RecordingConfig:
 
 @dataclass
 class AgentConfig:
-    """One agent to spawn: namespace robot_agent_N, type, initial pose, ArUco marker id, route."""
+    """One agent (SIMLAN's ROBOTS/HUMANOIDS entries): type, initial pose, marker id, goals.
 
-    namespace: str = MISSING
+    Agents are keyed by namespace (robot_agent_N) in ``agents``; the marker id defaults to N.
+    Robots plan to their goals in order and steer on the camera estimate; a humanoid walks
+    straight from goal to goal; a Panda stays where it is.
+    """
+
     type: str = "pallet_truck"
     pose: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     marker_id: Optional[int] = None  # noqa: UP045 - OmegaConf needs typing.Optional
-    waypoints: list[list[float]] = field(default_factory=list)
+    goals: list[list[float]] = field(default_factory=list)
     speed_mps: float = 1.0
     loop: bool = False
+    namespace: str = ""  # set from the key in ``agents``
 
-    def __post_init__(self) -> None:
-        if _incomplete(self):
-            return
-        m = NAMESPACE_RE.match(self.namespace)
+    def check(self, namespace: str) -> None:
+        self.namespace = namespace
+        m = NAMESPACE_RE.match(namespace)
         if not m:
             raise _bad(
-                "agents[].namespace",
-                self.namespace,
-                "must be robot_agent_N (SIMLAN's namespaces)",
+                "agents",
+                namespace,
+                "agent keys must be robot_agent_N (SIMLAN's namespaces)",
                 "rename it, e.g. robot_agent_1",
             )
         if self.marker_id is None:
             self.marker_id = int(m.group(1))
         if not 0 <= self.marker_id < 1000:
             raise _bad(
-                f"agents[{self.namespace}].marker_id",
+                f"agents.{namespace}.marker_id",
                 self.marker_id,
                 "DICT_5X5_1000 has ids 0..999",
                 "use the N of robot_agent_N",
             )
         if len(self.pose) != 3:
             raise _bad(
-                f"agents[{self.namespace}].pose",
+                f"agents.{namespace}.pose",
                 list(self.pose),
                 "expected [x_m, y_m, yaw_rad]",
                 "give three numbers",
             )
-        for i, wp in enumerate(self.waypoints):
-            if len(wp) != 2:
+        for i, goal in enumerate(self.goals):
+            if len(goal) != 2:
                 raise _bad(
-                    f"agents[{self.namespace}].waypoints[{i}]",
-                    list(wp),
+                    f"agents.{namespace}.goals[{i}]",
+                    list(goal),
                     "expected [x_m, y_m]",
-                    "give two numbers per waypoint",
+                    "give two numbers per goal",
                 )
         if not 0 < self.speed_mps <= 3.0:
             raise _bad(
-                f"agents[{self.namespace}].speed_mps",
-                self.speed_mps,
-                "must be within (0, 3] m/s",
-                "use e.g. 1.0",
+                f"agents.{namespace}.speed_mps", self.speed_mps, "must be within (0, 3] m/s", "use e.g. 1.0"
             )
 
     @property
@@ -318,6 +319,67 @@ class AgentConfig:
         m = NAMESPACE_RE.match(self.namespace)
         assert m is not None
         return int(m.group(1))
+
+
+@dataclass
+class LocalizationConfig:
+    """Camera-based localization (GPSS)."""
+
+    source: str = "camera"  # camera | ground_truth (robots steer on this)
+    method: str = "ground"  # ground (marker-plane ray intersection) | pnp (IPPE_SQUARE)
+    unobserved_timeout_s: float = 0.5
+    lost_timeout_s: float = 1.5
+    processing_delay_s: float = 0.0
+    bias_m: list[float] = field(default_factory=lambda: [0.0, 0.0])  # fault injection: added to every fix
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("localization.source", self.source, ("camera", "ground_truth"))
+        _choice("localization.method", self.method, ("ground", "pnp"))
+        _positive("localization.unobserved_timeout_s", self.unobserved_timeout_s, "use 0.5")
+        if self.lost_timeout_s < self.unobserved_timeout_s:
+            raise _bad(
+                "localization.lost_timeout_s",
+                self.lost_timeout_s,
+                "must be >= localization.unobserved_timeout_s",
+                "use 1.5",
+            )
+        if not 0 <= self.processing_delay_s <= 5:
+            raise _bad(
+                "localization.processing_delay_s", self.processing_delay_s, "must be within 0..5 s", "use 0"
+            )
+        if len(self.bias_m) != 2:
+            raise _bad("localization.bias_m", list(self.bias_m), "expected [x_m, y_m]", "use [0.0, 0.0]")
+
+
+@dataclass
+class NavigationConfig:
+    """Occupancy grid, planner, path follower and multi-robot coordination."""
+
+    map: str = "world"  # world (from the layout) | simlan (SIMLAN's Nav2 map)
+    resolution_m: float = 0.1
+    clearance_m: float = 0.4  # planned paths keep half the robot's width plus this from obstacles
+    lookahead_m: float = 1.2
+    goal_tolerance_m: float = 0.3
+    max_yaw_rate_rps: float = 0.8
+    coordination: bool = True
+    safety_distance_m: float = 0.6  # robots keep at least this between footprints
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("navigation.map", self.map, ("world", "simlan"))
+        if not 0.02 <= self.resolution_m <= 0.5:
+            raise _bad("navigation.resolution_m", self.resolution_m, "must be within 0.02..0.5 m", "use 0.1")
+        for name in (
+            "clearance_m",
+            "lookahead_m",
+            "goal_tolerance_m",
+            "max_yaw_rate_rps",
+            "safety_distance_m",
+        ):
+            _positive(f"navigation.{name}", getattr(self, name), "use a positive value")
 
 
 @dataclass
@@ -339,7 +401,9 @@ class Config:
     cameras: CameraSetConfig = field(default_factory=CameraSetConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
     recording: RecordingConfig = field(default_factory=RecordingConfig)
-    agents: list[AgentConfig] = field(default_factory=list)
+    localization: LocalizationConfig = field(default_factory=LocalizationConfig)
+    navigation: NavigationConfig = field(default_factory=NavigationConfig)
+    agents: dict[str, AgentConfig] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
@@ -365,26 +429,27 @@ class Config:
                     f"must divide the camera rate cameras.rate_hz={self.cameras.rate_hz} (every n-th frame is recorded)",
                     f"use e.g. {self.cameras.rate_hz} or {self.cameras.rate_hz / 5:g}",
                 )
-        seen_ns: set[str] = set()
         seen_marker: dict[int, str] = {}
-        for agent in self.agents:
-            if agent.namespace in seen_ns:
-                raise _bad(
-                    "agents[].namespace",
-                    agent.namespace,
-                    "appears twice",
-                    "give every agent its own robot_agent_N",
-                )
-            seen_ns.add(agent.namespace)
+        ordered: dict[str, AgentConfig] = {}
+        for ns in sorted(self.agents, key=lambda k: (len(k), k)):
+            agent = self.agents[ns]
+            agent.check(ns)
             assert agent.marker_id is not None
             if agent.marker_id in seen_marker:
                 raise _bad(
-                    f"agents[{agent.namespace}].marker_id",
+                    f"agents.{ns}.marker_id",
                     agent.marker_id,
                     f"already used by {seen_marker[agent.marker_id]}",
                     "give every robot its own marker id",
                 )
-            seen_marker[agent.marker_id] = agent.namespace
+            seen_marker[agent.marker_id] = ns
+            ordered[ns] = agent
+        self.agents = ordered
+
+    @property
+    def agent_list(self) -> list[AgentConfig]:
+        """Agents in namespace order."""
+        return list(self.agents.values())
 
 
 def register_configs() -> None:

@@ -24,6 +24,8 @@ from .cli import run_cli
 from .config import Config, register_configs
 from .constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from .errors import ConfigError, RunError, SimlanError
+from .evaluation.localization_replay import recording_metrics
+from .evaluation.replay import ReplayContext
 from .evaluation.report import write_report
 from .recording.reader import RecordingReader
 from .sim.scene import load_inputs
@@ -96,10 +98,14 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
     finally:
         bar.close()
     metrics = stats.metrics()
-    (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
     if cfg.recording.enabled:
         with RecordingReader(bag) as reader:
+            ctx = ReplayContext(reader, run_dir)
+            metrics.update(recording_metrics(reader, ctx.config, ctx.cameras))
+            (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
             write_report(run_dir, cfg, stats, metrics, reader)
+    else:
+        (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
     marker.unlink()
     print_summary(cfg, stats, metrics, run_dir)
     return metrics
@@ -119,8 +125,14 @@ def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_d
         f"  cameras        {len(cfg.cameras.ids)} x {cfg.cameras.rate_hz:g} Hz {cfg.cameras.width}x{cfg.cameras.height} {streams}, {int(stats.camera_frames)} frames ({stats.renderer} renderer, {'layered' if cfg.render.layered else 'full'})",
     ]
     for ns in sorted(stats.collisions):
+        nav = ""
+        if f"navigation.{ns}.goals_total" in metrics:
+            nav = f"{int(metrics[f'navigation.{ns}.goals_reached'])}/{int(metrics[f'navigation.{ns}.goals_total'])} goals, "
+        loc = ""
+        if f"localization.{ns}.ate_xy_rmse_m" in metrics:
+            loc = f", ATE {metrics[f'localization.{ns}.ate_xy_rmse_m'] * 100:.1f} cm, availability {metrics[f'localization.{ns}.availability']:.3f}"
         lines.append(
-            f"  {ns:<14} {stats.goals_reached.get(ns, 0)}/{stats.goals_total.get(ns, 0)} waypoints, {stats.collisions[ns]} collisions, {stats.distance_m.get(ns, 0.0):.1f} m driven"
+            f"  {ns:<14} {nav}{stats.collisions[ns]} collisions, {stats.distance_m.get(ns, 0.0):.1f} m driven{loc}"
         )
     if stats.calibration_issues:
         lines.append(

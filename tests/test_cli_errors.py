@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from conftest import compose_config, run_cli
+from simlan_data.config import AgentConfig
 from simlan_data.constants import CALIBRATION_DIR
 from simlan_data.errors import ConfigError
 from simlan_data.run import to_config
@@ -31,9 +32,9 @@ def _one_error_line(stderr: str) -> str:
         (["no_such_key=1"], "invalid configuration"),
         (["cameras=no_such_set"], "invalid configuration"),
         (["world.fidelity=ultra"], "invalid world.fidelity='ultra'"),
-        (["agents.0.type=hovercraft"], "unknown agent type 'hovercraft'"),
-        (["agents.0.pose=[-13.0,4.0,0.0]"], "footprint overlaps"),
-        (["agents.0.pose=[100.0,0.0,0.0]"], "footprint leaves the building"),
+        (["agents.robot_agent_1.type=hovercraft"], "unknown agent type 'hovercraft'"),
+        (["agents.robot_agent_1.pose=[-13.0,4.0,0.0]"], "footprint overlaps"),
+        (["agents.robot_agent_1.pose=[100.0,0.0,0.0]"], "footprint leaves the building"),
         (["cameras.rate_hz=7"], "invalid cameras.rate_hz=7.0"),
     ],
 )
@@ -90,9 +91,13 @@ def test_help_lists_groups_and_keys() -> None:
 
 def test_config_checks_without_a_process() -> None:
     cfg = to_config(compose_config("cameras=single", "duration_s=2"))
-    assert cfg.cameras.ids == [163] and cfg.agents[0].marker_id == 1
-    with pytest.raises(ConfigError, match=r"invalid agents\[\]\.namespace='truck_1'"):
-        to_config(compose_config("agents.0.namespace=truck_1"))
+    assert cfg.cameras.ids == [163] and cfg.agents["robot_agent_1"].marker_id == 1
+    with pytest.raises(ConfigError, match=r"invalid agents='truck_1'.*must be robot_agent_N"):
+        AgentConfig(type="jackal").check("truck_1")
+    with pytest.raises(
+        ConfigError, match=r"invalid agents.robot_agent_1.goals\[0\]=\[-13.0, 3.5\].*inside an obstacle"
+    ):
+        load_inputs(to_config(compose_config("cameras=single", "agents.robot_agent_1.goals=[[-13.0,3.5]]")))
     with pytest.raises(ConfigError, match=r"recording.depth_rate_hz=2.0 in config: must divide"):
         to_config(compose_config("recording.depth_rate_hz=2"))
     with pytest.raises(ConfigError, match=r"unknown camera id 777"):

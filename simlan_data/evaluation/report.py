@@ -83,12 +83,19 @@ def write_report(
         "",
         "## Agents",
         "",
-        "| namespace | waypoints reached | collisions | distance (m) |",
-        "| --- | --- | --- | --- |",
+        "| namespace | type | goals reached | collisions | distance (m) | ATE xy RMSE (m) | yaw RMSE (deg) | availability |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
+
+    def fmt(key: str, spec: str = ".3f") -> str:
+        value = metrics.get(key)
+        return "-" if value is None else format(value, spec)
+
     for ns in sorted(stats.collisions):
+        goals = f"{fmt(f'navigation.{ns}.goals_reached', '.0f')}/{fmt(f'navigation.{ns}.goals_total', '.0f')}"
         lines.append(
-            f"| {ns} | {stats.goals_reached.get(ns, 0)}/{stats.goals_total.get(ns, 0)} | {stats.collisions[ns]} | {stats.distance_m.get(ns, 0.0):.2f} |"
+            f"| {ns} | {cfg.agents[ns].type} | {goals} | {stats.collisions[ns]} | {stats.distance_m.get(ns, 0.0):.2f} | "
+            f"{fmt(f'localization.{ns}.ate_xy_rmse_m', '.4f')} | {fmt(f'localization.{ns}.yaw_rmse_deg')} | {fmt(f'localization.{ns}.availability')} |"
         )
     lines += ["", "## Metrics", "", "| metric | value |", "| --- | --- |"]
     lines += [f"| `{k}` | {v:.6g} |" for k, v in sorted(metrics.items())]

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 
 @dataclass(frozen=True)
@@ -99,3 +100,115 @@ class WaypointFollower:
         along = float(np.clip((pos - start) @ u, 0.0, length))
         ahead = min(length, along + self.params.lookahead_m)
         return start + u * ahead
+
+
+@dataclass(frozen=True)
+class PursuitParams:
+    """Regulated pure pursuit (after Nav2's RPP)."""
+
+    max_speed_mps: float = 1.0
+    min_lookahead_m: float = 0.8
+    max_lookahead_m: float = 2.0
+    lookahead_time_s: float = 1.2
+    accel_mps2: float = 0.6
+    decel_mps2: float = 1.0
+    max_yaw_rate_rps: float = 0.8
+    rotate_in_place_rad: float = 0.8  # turn on the spot when the path is this far off heading
+    regulated_radius_m: float = 2.0  # slow down on curves tighter than this
+    min_regulated_speed_mps: float = 0.25
+    approach_distance_m: float = 1.2  # slow down this close to the goal
+    goal_tolerance_m: float = 0.3
+
+
+class PathFollower:
+    """Follow a planned polyline to its end with regulated pure pursuit.
+
+    Speed is limited by curvature, by the distance to the goal and by an external limit (the
+    multi-robot coordinator, the safety layer); acceleration is bounded.
+    """
+
+    def __init__(self, path_xy: NDArray[np.float64], params: PursuitParams) -> None:
+        self.path = np.asarray(path_xy, dtype=float).reshape(-1, 2)
+        self.params = params
+        seg = np.diff(self.path, axis=0)
+        self._seg_len = np.linalg.norm(seg, axis=1)
+        self._cum = np.concatenate([[0.0], np.cumsum(self._seg_len)])
+        self.length_m = float(self._cum[-1])
+        self._progress_m = 0.0
+        self._speed = 0.0
+        self._rotating = False
+        self.done = self.length_m < 1e-6
+
+    def _project(self, p: NDArray[np.float64]) -> float:
+        """Arc length of the closest path point to ``p``, searched forward of the progress so far."""
+        best_s, best_d = self._progress_m, np.inf
+        for i in range(len(self._seg_len)):
+            if self._cum[i + 1] < self._progress_m - 0.5:
+                continue
+            a, L = self.path[i], self._seg_len[i]
+            if L < 1e-9:
+                continue
+            u = (self.path[i + 1] - a) / L
+            t = float(np.clip((p - a) @ u, 0.0, L))
+            d = float(np.linalg.norm(a + t * u - p))
+            if d < best_d:
+                best_d, best_s = d, self._cum[i] + t
+            if self._cum[i] > self._progress_m + 5.0:
+                break
+        return max(best_s, self._progress_m)
+
+    def point_at(self, s: float) -> NDArray[np.float64]:
+        s = float(np.clip(s, 0.0, self.length_m))
+        i = int(np.clip(np.searchsorted(self._cum, s, side="right") - 1, 0, len(self._seg_len) - 1))
+        L = self._seg_len[i]
+        t = 0.0 if L < 1e-9 else (s - self._cum[i]) / L
+        return self.path[i] + t * (self.path[i + 1] - self.path[i])
+
+    def remaining_m(self) -> float:
+        return self.length_m - self._progress_m
+
+    def step(
+        self, x: float, y: float, yaw: float, dt_s: float, *, speed_limit_mps: float | None = None
+    ) -> tuple[float, float]:
+        """Twist (v, w) for the next ``dt_s``; sets ``done`` at the goal."""
+        p = self.params
+        if self.done:
+            self._speed = 0.0
+            return 0.0, 0.0
+        pos = np.array([x, y])
+        self._progress_m = self._project(pos)
+        goal = self.path[-1]
+        dist_goal = float(np.linalg.norm(goal - pos))
+        if dist_goal < p.goal_tolerance_m or (
+            self.remaining_m() < p.goal_tolerance_m and dist_goal < 2 * p.goal_tolerance_m
+        ):
+            self.done = True
+            self._speed = 0.0
+            return 0.0, 0.0
+        lookahead = float(np.clip(self._speed * p.lookahead_time_s, p.min_lookahead_m, p.max_lookahead_m))
+        carrot = self.point_at(self._progress_m + lookahead)
+        if np.linalg.norm(carrot - pos) < 1e-6:
+            carrot = goal
+        dx, dy = carrot - pos
+        alpha = float((np.arctan2(dy, dx) - yaw + np.pi) % (2 * np.pi) - np.pi)
+        if abs(alpha) > p.rotate_in_place_rad or (
+            self._rotating and abs(alpha) > 0.25 * p.rotate_in_place_rad
+        ):
+            self._rotating = True
+            self._speed = 0.0
+            return 0.0, float(np.clip(1.5 * alpha, -p.max_yaw_rate_rps, p.max_yaw_rate_rps))
+        self._rotating = False
+        dist = max(float(np.hypot(dx, dy)), 1e-6)
+        curvature = 2.0 * np.sin(alpha) / dist
+        v = p.max_speed_mps
+        if abs(curvature) > 1e-9 and 1.0 / abs(curvature) < p.regulated_radius_m:
+            v = max(p.min_regulated_speed_mps, v * (1.0 / abs(curvature)) / p.regulated_radius_m)
+        v = min(v, max(0.15, p.max_speed_mps * dist_goal / p.approach_distance_m))
+        if speed_limit_mps is not None:
+            v = min(v, speed_limit_mps)
+        if v < self._speed:
+            self._speed = max(v, self._speed - p.decel_mps2 * dt_s)
+        else:
+            self._speed = min(v, self._speed + p.accel_mps2 * dt_s)
+        w = float(np.clip(self._speed * curvature, -p.max_yaw_rate_rps, p.max_yaw_rate_rps))
+        return self._speed, w

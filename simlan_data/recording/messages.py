@@ -36,6 +36,11 @@ Path = T[schema.PATH_TYPE]
 RunInfo = T[schema.RUN_INFO_TYPE]
 SemanticLabels = T[schema.SEMANTIC_LABELS_TYPE]
 CollisionState = T[schema.COLLISION_STATE_TYPE]
+MarkerDetections = T[schema.MARKER_DETECTIONS_TYPE]
+NavigationStatusMsg = T[schema.NAVIGATION_STATUS_TYPE]
+LocalizationStatusMsg = T[schema.LOCALIZATION_STATUS_TYPE]
+PoseWithCovariance = T["geometry_msgs/msg/PoseWithCovariance"]
+PoseWithCovarianceStamped = T[schema.POSE_COV_TYPE]
 
 
 def time_msg(stamp_ns: int) -> Any:
@@ -215,4 +220,67 @@ def collision_state(
         max_normal_force_n=float(max_force_n),
         total_normal_force_n=float(total_force_n),
         other_bodies=list(others),
+    )
+
+
+def pose_stamped(stamp_ns: int, frame_id: str, x: float, y: float, yaw: float) -> Any:
+    q = (0.0, 0.0, float(np.sin(yaw / 2)), float(np.cos(yaw / 2)))
+    return PoseStamped(header=header(stamp_ns, frame_id), pose=pose_msg(x, y, 0.0, q))
+
+
+def pose_with_covariance(
+    stamp_ns: int, frame_id: str, x: float, y: float, yaw: float, cov_xyyaw: np.ndarray
+) -> Any:
+    """PoseWithCovarianceStamped of a planar pose; covariance over (x, y, yaw), z/roll/pitch fixed."""
+    cov = np.zeros((6, 6))
+    idx = [0, 1, 5]
+    cov[np.ix_(idx, idx)] = cov_xyyaw
+    q = (0.0, 0.0, float(np.sin(yaw / 2)), float(np.cos(yaw / 2)))
+    return PoseWithCovarianceStamped(
+        header=header(stamp_ns, frame_id),
+        pose=PoseWithCovariance(pose=pose_msg(x, y, 0.0, q), covariance=cov.reshape(-1)),
+    )
+
+
+def marker_detections(
+    stamp_ns: int, frame_id: str, ids: Sequence[int], corners_px: np.ndarray, mode: str
+) -> Any:
+    corners = np.asarray(corners_px, dtype=np.float32).reshape(-1)
+    return MarkerDetections(
+        header=header(stamp_ns, frame_id), ids=np.asarray(ids, dtype=np.int32), corners_px=corners, mode=mode
+    )
+
+
+def navigation_status(
+    stamp_ns: int,
+    *,
+    state: str,
+    goal_index: int,
+    goals_total: int,
+    goals_reached: int,
+    goals_failed: int,
+    planned_length_m: float,
+    blocked_by: Sequence[str],
+) -> Any:
+    return NavigationStatusMsg(
+        header=header(stamp_ns, schema.MAP_FRAME),
+        state=state,
+        goal_index=int(goal_index),
+        goals_total=int(goals_total),
+        goals_reached=int(goals_reached),
+        goals_failed=int(goals_failed),
+        planned_length_m=float(planned_length_m),
+        blocked_by=list(blocked_by),
+    )
+
+
+def localization_status(
+    stamp_ns: int, *, observed: bool, valid: bool, fix_age_s: float, cameras: Sequence[str]
+) -> Any:
+    return LocalizationStatusMsg(
+        header=header(stamp_ns, schema.MAP_FRAME),
+        observed=bool(observed),
+        valid=bool(valid),
+        fix_age_s=float(fix_age_s),
+        cameras=list(cameras),
     )

@@ -34,9 +34,15 @@ PATH_TYPE = "nav_msgs/msg/Path"
 RUN_INFO_TYPE = "simlan_msgs/msg/RunInfo"
 SEMANTIC_LABELS_TYPE = "simlan_msgs/msg/SemanticLabels"
 COLLISION_STATE_TYPE = "simlan_msgs/msg/CollisionState"
+MARKER_DETECTIONS_TYPE = "simlan_msgs/msg/MarkerDetections"
+NAVIGATION_STATUS_TYPE = "simlan_msgs/msg/NavigationStatus"
+LOCALIZATION_STATUS_TYPE = "simlan_msgs/msg/LocalizationStatus"
+POSE_COV_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
 
 # ------------------------------------------------------------------------------------- topics
 CLOCK = "/clock"
+TF = "/tf"
 TF_STATIC = "/tf_static"
 GROUND_TRUTH_POSES = "/ground_truth/poses"
 CONFIG = "/simlan/config"
@@ -95,6 +101,11 @@ def camera_topics(
                 "z-depth, 16UC1 millimetres in PNG (compressed_depth_image_transport), 0 = no return",
             )
         )
+    out["detections"] = Topic(
+        f"{base}/marker_detections",
+        MARKER_DETECTIONS_TYPE,
+        "ArUco markers the localizer found in the image (when it searched it)",
+    )
     if semantic is not None:
         out["semantic"] = (
             Topic(
@@ -125,13 +136,36 @@ def agent_topics(namespace: str) -> dict[str, Topic]:
             COLLISION_STATE_TYPE,
             "collision sensor: contacts with anything but the floor",
         ),
-        "plan": Topic(f"/{namespace}/plan", PATH_TYPE, "route the robot follows (map frame), on change"),
+        "plan": Topic(
+            f"/{namespace}/plan", PATH_TYPE, "planned path to the current goal (map frame), on every new plan"
+        ),
+        "goal": Topic(
+            f"/{namespace}/goal",
+            POSE_STAMPED_TYPE,
+            "the goal the robot is heading for (map frame), on change",
+        ),
+        "pose_estimate": Topic(
+            f"/{namespace}/pose_estimate",
+            POSE_COV_TYPE,
+            "camera-based pose estimate of base_link in map, control rate",
+        ),
+        "navigation": Topic(
+            f"/{namespace}/navigation_status",
+            NAVIGATION_STATUS_TYPE,
+            "navigation state, goals reached, on change",
+        ),
+        "localization": Topic(
+            f"/{namespace}/localization_status",
+            LOCALIZATION_STATUS_TYPE,
+            "observed/valid flags and age of the newest camera fix, control rate",
+        ),
     }
 
 
 GLOBAL_TOPICS: tuple[Topic, ...] = (
     Topic(CLOCK, CLOCK_TYPE, "simulated clock, at the ground-truth rate"),
-    Topic(TF_STATIC, TF_TYPE, "map -> camera_<id>_optical_frame for every camera (latched, once)"),
+    Topic(TF_STATIC, TF_TYPE, "map -> camera_<id>_optical_frame for every camera, map -> <ns>/odom (once)"),
+    Topic(TF, TF_TYPE, "<ns>/odom -> <ns>/base_link from the camera-based localization, control rate"),
     Topic(GROUND_TRUTH_POSES, TF_TYPE, "ground truth map -> <ns>/base_link of every agent (>= 50 Hz)"),
     Topic(CONFIG, STRING_TYPE, "the resolved run config as YAML (once)"),
     Topic(RUN_INFO, RUN_INFO_TYPE, "format version, seed, package and dependency versions, renderer (once)"),

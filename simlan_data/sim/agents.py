@@ -1,9 +1,12 @@
-"""Agents in the PyBullet world: differential-drive robots carrying an ArUco marker.
+"""Agents in the PyBullet world.
 
-An agent type is data (:class:`AgentType`); :class:`DiffDriveAgent` spawns it from its URDF
-(with the marker cells inserted for the agent's id), turns velocity commands into wheel motor
-targets, reports its ground-truth pose and twist, and senses collisions (contacts with anything
-but the floor).
+- :class:`DiffDriveAgent`: robots (pallet truck, forklift, jackal) with wheel motors and an ArUco
+  marker, driven by velocity commands through physics;
+- :class:`WalkerAgent`: a person moved kinematically along its path (the articulated humanoid of
+  the pose-mapping work is separate);
+- :class:`StaticAgent`: a fixed robot (the Panda arm).
+
+All report their ground-truth pose and sense collisions (contacts with anything but the floor).
 """
 
 from __future__ import annotations
@@ -14,8 +17,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pybullet_data
 
 from .._pybullet import pb, silence_c_output
+from ..agent_types import AGENT_TYPES, MARKER_SIZE_M, AgentType, agent_type
 from ..constants import URDF_DIR
 from ..errors import ConfigError
 from ..geometry.rotations import quat_from_yaw
@@ -23,53 +28,21 @@ from ..geometry.transforms import Transform
 from ..world.labels import label_id
 from .markers import marker_urdf
 
+__all__ = [
+    "AGENT_TYPES",
+    "Agent",
+    "AgentType",
+    "CollisionReading",
+    "DiffDriveAgent",
+    "StaticAgent",
+    "WalkerAgent",
+    "agent_type",
+    "spawn_agent",
+    "urdf_with_marker",
+]
+
 MARKER_PLACEHOLDER = "<!-- ARUCO_MARKER -->"
-
-
-@dataclass(frozen=True)
-class AgentType:
-    """Geometry and limits of one kind of robot."""
-
-    name: str
-    urdf: str
-    semantic: str
-    marker_xyz: tuple[float, float, float]
-    wheel_joints: tuple[str, str]
-    wheel_radius_m: float
-    track_m: float
-    max_speed_mps: float
-    max_yaw_rate_rps: float
-    max_wheel_torque_nm: float
-    footprint_m: tuple[float, float, float, float]  # x_min, x_max, y_min, y_max in base_link
-    caster_links: tuple[str, ...] = ()
-    wheel_friction: float = 1.0
-
-
-AGENT_TYPES: dict[str, AgentType] = {
-    "pallet_truck": AgentType(
-        name="pallet_truck",
-        urdf="pallet_truck.urdf",
-        semantic="pallet_truck",
-        marker_xyz=(-0.8, 0.0, 1.30),
-        wheel_joints=("left_wheel_joint", "right_wheel_joint"),
-        wheel_radius_m=0.1,
-        track_m=0.72,
-        max_speed_mps=2.0,
-        max_yaw_rate_rps=1.0,
-        max_wheel_torque_nm=120.0,
-        footprint_m=(-1.15, 0.70, -0.40, 0.40),
-        caster_links=("rear_caster", "left_fork_caster", "right_fork_caster"),
-    ),
-}
-
-
-def agent_type(name: str, *, where: str = "agents[].type") -> AgentType:
-    try:
-        return AGENT_TYPES[name]
-    except KeyError:
-        raise ConfigError(
-            f"unknown agent type '{name}'", where, f"known types: {', '.join(AGENT_TYPES)}", "use one of them"
-        ) from None
+VISUAL_MARGIN_M = 0.08
 
 
 @dataclass
@@ -80,9 +53,11 @@ class CollisionReading:
     others: list[str] = field(default_factory=list)
 
 
-def urdf_with_marker(kind: AgentType, marker_id: int) -> str:
-    """The agent type's URDF text with the cells of ``marker_id`` inserted."""
+def urdf_with_marker(kind: AgentType, marker_id: int | None) -> str:
+    """The agent type's URDF text, with the cells of ``marker_id`` inserted if it carries one."""
     text = (URDF_DIR / kind.urdf).read_text()
+    if kind.marker_xyz is None or marker_id is None:
+        return text
     if MARKER_PLACEHOLDER not in text:
         raise ConfigError(
             "URDF lacks the marker placeholder",
@@ -90,39 +65,108 @@ def urdf_with_marker(kind: AgentType, marker_id: int) -> str:
             f"no {MARKER_PLACEHOLDER} line",
             "restore the packaged URDF",
         )
-    return text.replace(MARKER_PLACEHOLDER, marker_urdf(marker_id, xyz=kind.marker_xyz))
+    return text.replace(MARKER_PLACEHOLDER, marker_urdf(marker_id, xyz=kind.marker_xyz, size_m=MARKER_SIZE_M))
 
 
-class DiffDriveAgent:
-    """A spawned differential-drive robot."""
+class Agent:
+    """What every agent can do: pose, bounds, collision sensing."""
 
-    def __init__(
-        self, client: int, namespace: str, kind: AgentType, *, pose: Sequence[float], marker_id: int
-    ) -> None:
-        self.client, self.namespace, self.kind, self.marker_id = client, namespace, kind, int(marker_id)
+    def __init__(self, client: int, namespace: str, kind: AgentType, body: int) -> None:
+        self.client, self.namespace, self.kind, self.body = client, namespace, kind, body
         self.label = label_id(kind.semantic)
-        x, y, yaw = (float(v) for v in pose)
-        with tempfile.TemporaryDirectory(prefix="simlan_urdf_") as tmp:
-            path = Path(tmp) / f"{namespace}.urdf"
-            path.write_text(urdf_with_marker(kind, marker_id))
-            with silence_c_output(stderr=True):
-                self.body = pb.loadURDF(
-                    str(path),
-                    [x, y, 0.002],
-                    list(quat_from_yaw(yaw)),
-                    useFixedBase=False,
-                    physicsClientId=client,
-                )
-        if self.body < 0:
-            raise ConfigError(
-                "agent URDF failed to load", kind.urdf, "PyBullet rejected it", "check the URDF"
-            )
         self.links: dict[str, int] = {}
         self.joints: dict[str, int] = {}
-        for j in range(pb.getNumJoints(self.body, physicsClientId=client)):
-            info = pb.getJointInfo(self.body, j, physicsClientId=client)
+        for j in range(pb.getNumJoints(body, physicsClientId=client)):
+            info = pb.getJointInfo(body, j, physicsClientId=client)
             self.joints[info[1].decode()] = j
             self.links[info[12].decode()] = j
+        info = pb.getDynamicsInfo(body, -1, physicsClientId=client)
+        self._link_in_com = pb.invertTransform(info[3], info[4])
+        self.command = (0.0, 0.0)
+
+    def pose(self) -> Transform:
+        """Ground-truth map -> base_link (PyBullet's base frame is the centre of mass)."""
+        pos, orn = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        pos, orn = pb.multiplyTransforms(pos, orn, *self._link_in_com)
+        return Transform.from_quat(pos, orn)
+
+    def twist(self) -> tuple[float, float]:
+        """Ground-truth forward speed (m/s, along base_link x) and yaw rate (rad/s)."""
+        lin, ang = pb.getBaseVelocity(self.body, physicsClientId=self.client)
+        pose = self.pose()
+        return float(pose.rotation[:, 0] @ np.asarray(lin)), float(ang[2])
+
+    def aabbs(self) -> list[tuple[Sequence[float], Sequence[float]]]:
+        """Bounds of everything the agent draws (for the layered renderer).
+
+        PyBullet's AABBs come from collision shapes: they are grown by ``VISUAL_MARGIN_M`` for
+        visuals that stick out a little (sleeves, shoes), and the marker plate, which has no
+        collision shape at all, is added from its known geometry.
+        """
+        m = VISUAL_MARGIN_M
+        out = []
+        for link in (-1, *self.joints.values()):
+            lo, hi = pb.getAABB(self.body, link, physicsClientId=self.client)
+            out.append(([lo[0] - m, lo[1] - m, lo[2] - m], [hi[0] + m, hi[1] + m, hi[2] + m]))
+        if self.kind.marker_xyz is not None:
+            h = 0.5 * MARKER_SIZE_M * 9.0 / 7.0 + 0.01  # quiet zone: one cell around the 7x7 grid
+            plate = (
+                np.array([[sx * h, sy * h, dz] for sx in (-1, 1) for sy in (-1, 1) for dz in (-0.03, 0.01)])
+                + self.kind.marker_xyz
+            )
+            corners = self.pose().apply(plate)
+            out.append((corners.min(axis=0).tolist(), corners.max(axis=0).tolist()))
+        return out
+
+    def apply_command(self, linear_mps: float, angular_rps: float) -> tuple[float, float]:  # noqa: ARG002 - fixed agents ignore commands
+        return (0.0, 0.0)
+
+    def step_kinematics(self, dt_s: float) -> None:
+        """Move a kinematic agent by ``dt_s`` (no-op for physical ones)."""
+
+    def collisions(self, ignore: Collection[int], names: Mapping[int, str]) -> CollisionReading:
+        """Contacts with any body but ``ignore`` (the floor): forces and who was touched."""
+        contacts = pb.getContactPoints(bodyA=self.body, physicsClientId=self.client)
+        forces, others = [], set()
+        for c in contacts:
+            other = c[2]
+            if other in ignore or other == self.body:
+                continue
+            forces.append(float(c[9]))
+            others.add(names.get(other, f"body_{other}"))
+        if not forces:
+            return CollisionReading(False, 0.0, 0.0, [])
+        return CollisionReading(True, max(forces), float(sum(forces)), sorted(others))
+
+
+def _load(
+    client: int, kind: AgentType, namespace: str, marker_id: int | None, pose: Sequence[float], *, fixed: bool
+) -> int:
+    x, y, yaw = (float(v) for v in pose)
+    orn = list(quat_from_yaw(yaw))
+    with tempfile.TemporaryDirectory(prefix="simlan_urdf_") as tmp, silence_c_output(stderr=True):
+        if kind.urdf.startswith("pybullet_data:"):
+            path = str(Path(pybullet_data.getDataPath()) / kind.urdf.split(":", 1)[1])
+            body = pb.loadURDF(path, [x, y, 0.0], orn, useFixedBase=fixed, physicsClientId=client)
+        else:
+            path = str(Path(tmp) / f"{namespace}.urdf")
+            Path(path).write_text(urdf_with_marker(kind, marker_id))
+            body = pb.loadURDF(path, [x, y, 0.002], orn, useFixedBase=fixed, physicsClientId=client)
+    if body < 0:
+        raise ConfigError("agent URDF failed to load", kind.urdf, "PyBullet rejected it", "check the URDF")
+    return body
+
+
+class DiffDriveAgent(Agent):
+    """A differential-drive robot driven through its wheel motors."""
+
+    def __init__(
+        self, client: int, namespace: str, kind: AgentType, *, pose: Sequence[float], marker_id: int | None
+    ) -> None:
+        super().__init__(
+            client, namespace, kind, _load(client, kind, namespace, marker_id, pose, fixed=False)
+        )
+        self.marker_id = marker_id
         self.wheel_indices = [self.joints[n] for n in kind.wheel_joints]
         for link in kind.caster_links:
             pb.changeDynamics(
@@ -135,38 +179,7 @@ class DiffDriveAgent:
             )
         for j in self.wheel_indices:
             pb.changeDynamics(self.body, j, lateralFriction=kind.wheel_friction, physicsClientId=client)
-        # base_link frame vs. PyBullet's base (centre of mass) frame
-        info = pb.getDynamicsInfo(self.body, -1, physicsClientId=client)
-        self._com_in_link = Transform.from_quat(info[3], info[4])
-        self._link_in_com = pb.invertTransform(info[3], info[4])
-        self.command = (0.0, 0.0)
 
-    # ----------------------------------------------------------------------------- state
-    def pose(self) -> Transform:
-        """Ground-truth map -> base_link."""
-        pos, orn = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-        pos, orn = pb.multiplyTransforms(pos, orn, *self._link_in_com)
-        return Transform.from_quat(pos, orn)
-
-    def twist(self) -> tuple[float, float]:
-        """Ground-truth forward speed (m/s, base_link x) and yaw rate (rad/s)."""
-        lin, ang = pb.getBaseVelocity(self.body, physicsClientId=self.client)
-        pose = self.pose()
-        com = pose.apply(self._com_in_link.translation)
-        v_link = np.asarray(lin) + np.cross(ang, pose.translation - com)
-        return float(pose.rotation[:, 0] @ v_link), float(ang[2])
-
-    def aabbs(self) -> list[tuple[Sequence[float], Sequence[float]]]:
-        """Axis-aligned bounds of every link (for the layered renderer)."""
-        out = [pb.getAABB(self.body, -1, physicsClientId=self.client)]
-        out += [pb.getAABB(self.body, j, physicsClientId=self.client) for j in self.joints.values()]
-        return out
-
-    def aabb(self) -> tuple[np.ndarray, np.ndarray]:
-        boxes = np.array(self.aabbs(), dtype=float)
-        return boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
-
-    # --------------------------------------------------------------------------- actuation
     def apply_command(self, linear_mps: float, angular_rps: float) -> tuple[float, float]:
         """Clamp a twist to the type's limits and set the wheel motors; returns the applied twist."""
         k = self.kind
@@ -185,17 +198,50 @@ class DiffDriveAgent:
         self.command = (v, w)
         return v, w
 
-    # ------------------------------------------------------------------------------ sensing
-    def collisions(self, ignore: Collection[int], names: Mapping[int, str]) -> CollisionReading:
-        """Contacts with any body but ``ignore`` (the floor): forces and who was touched."""
-        contacts = pb.getContactPoints(bodyA=self.body, physicsClientId=self.client)
-        forces, others = [], set()
-        for c in contacts:
-            other = c[2]
-            if other in ignore or other == self.body:
-                continue
-            forces.append(float(c[9]))
-            others.add(names.get(other, f"body_{other}"))
-        if not forces:
-            return CollisionReading(False, 0.0, 0.0, [])
-        return CollisionReading(True, max(forces), float(sum(forces)), sorted(others))
+
+class WalkerAgent(Agent):
+    """A person: a kinematic body that turns and walks as commanded (no physics forces)."""
+
+    def __init__(self, client: int, namespace: str, kind: AgentType, *, pose: Sequence[float]) -> None:
+        super().__init__(client, namespace, kind, _load(client, kind, namespace, None, pose, fixed=True))
+        self._x, self._y, self._yaw = (float(v) for v in pose)
+
+    def apply_command(self, linear_mps: float, angular_rps: float) -> tuple[float, float]:
+        k = self.kind
+        self.command = (
+            float(np.clip(linear_mps, 0.0, k.max_speed_mps)),
+            float(np.clip(angular_rps, -k.max_yaw_rate_rps, k.max_yaw_rate_rps)),
+        )
+        return self.command
+
+    def step_kinematics(self, dt_s: float) -> None:
+        v, w = self.command
+        self._yaw += w * dt_s
+        self._x += v * np.cos(self._yaw) * dt_s
+        self._y += v * np.sin(self._yaw) * dt_s
+        pb.resetBasePositionAndOrientation(
+            self.body, [self._x, self._y, 0.0], list(quat_from_yaw(self._yaw)), physicsClientId=self.client
+        )
+
+    def twist(self) -> tuple[float, float]:
+        return self.command
+
+
+class StaticAgent(Agent):
+    """A robot fixed in place (it does not drive)."""
+
+    def __init__(self, client: int, namespace: str, kind: AgentType, *, pose: Sequence[float]) -> None:
+        super().__init__(client, namespace, kind, _load(client, kind, namespace, None, pose, fixed=True))
+
+    def twist(self) -> tuple[float, float]:
+        return (0.0, 0.0)
+
+
+def spawn_agent(
+    client: int, namespace: str, kind: AgentType, *, pose: Sequence[float], marker_id: int | None
+) -> Agent:
+    if kind.drive == "diff":
+        return DiffDriveAgent(client, namespace, kind, pose=pose, marker_id=marker_id)
+    if kind.drive == "walker":
+        return WalkerAgent(client, namespace, kind, pose=pose)
+    return StaticAgent(client, namespace, kind, pose=pose)

@@ -52,7 +52,7 @@ class CameraRecorder:
         self._topics: dict[str, dict[str, schema.Topic]] = {}
         self._info: dict[str, bytes] = {}
         self._version: dict[str, int] = {}
-        self._cache: dict[tuple[str, str], tuple[int, Any]] = {}
+        self._cache: dict[tuple[str, str], tuple[int, Any, Any]] = {}
         self.encoded = 0
 
     def topics(self, camera_id: str) -> dict[str, schema.Topic]:
@@ -78,7 +78,8 @@ class CameraRecorder:
             return None if rec.depth_encoding == "raw" else encode_depth
         return None if rec.semantic_encoding == "raw" else encode_labels
 
-    def record(self, t: int, frame_index: int, camera: CameraModel, images: CameraImages) -> None:
+    def record(self, t: int, frame_index: int, camera: CameraModel, images: CameraImages) -> Any:
+        """Queue one camera frame; returns the future of the colour image's (format, bytes), or None."""
         cid, frame = camera.camera_id, camera.frame_id
         topics = self.topics(cid)
         if cid not in self._info:
@@ -91,18 +92,25 @@ class CameraRecorder:
             arrays["depth"] = images.depth_m
         if "semantic" in topics and frame_index % self.semantic_every == 0:
             arrays["semantic"] = images.labels
+        rgb_encoded = None
         for stream, array in arrays.items():
             topic, key = topics[stream], (cid, stream)
             cached = self._cache.get(key)
             if cached is not None and cached[0] == version:
-                self.writer.write_pending(topic, t, _Restamped(cached[1], t))
-                continue
-            encode = self._encoder(stream)
-            if encode is None:
-                pending = self.writer.submit(topic, t, lambda a=array, t=t: M.raw_image(t, frame, a))
+                _, encoded, pending = cached
+                self.writer.write_pending(topic, t, _Restamped(pending, t))
             else:
-                pending = self.writer.submit(
-                    topic, t, lambda a=array, t=t, enc=encode: M.compressed_image(t, frame, *enc(a))
-                )
-            self.encoded += 1
-            self._cache[key] = (version, pending)
+                encode = self._encoder(stream)
+                if encode is None:
+                    encoded = None
+                    pending = self.writer.submit(topic, t, lambda a=array, t=t: M.raw_image(t, frame, a))
+                else:
+                    encoded = self.writer.run_async(encode, array)
+                    pending = self.writer.submit(
+                        topic, t, lambda e=encoded, t=t: M.compressed_image(t, frame, *e.result())
+                    )
+                self.encoded += 1
+                self._cache[key] = (version, encoded, pending)
+            if stream == "rgb":
+                rgb_encoded = encoded
+        return rgb_encoded

@@ -15,14 +15,17 @@ from pathlib import Path
 import numpy as np
 
 from .._pybullet import pb
+from ..agent_types import AgentType, agent_type
 from ..config import AgentConfig, Config
+from ..constants import MAPS_DIR
 from ..errors import CalibrationError, ConfigError
 from ..geometry.calibration import Calibration, available_camera_ids, load_calibration
 from ..geometry.camera import CameraModel
+from ..gpss.occupancy import OccupancyGrid, grid_from_nav2_map, grid_from_world
 from ..world.builder import PhysicsParams, WorldBodies, build_world
 from ..world.layout import Placement, load_layout
 from ..world.models import BUILDING_X_M, BUILDING_Y_M
-from .agents import AgentType, DiffDriveAgent, agent_type
+from .agents import Agent, spawn_agent
 from .pybullet_client import Client, connect
 from .rendering import CameraRenderer, LabelTable
 
@@ -41,6 +44,7 @@ class Inputs:
     calibration_issues: list[str]
     placements: list[Placement]
     agent_types: dict[str, AgentType]
+    grid: OccupancyGrid
 
 
 def load_cameras(cfg: Config) -> tuple[list[CameraModel], list[str]]:
@@ -82,10 +86,29 @@ def load_cameras(cfg: Config) -> tuple[list[CameraModel], list[str]]:
 def load_inputs(cfg: Config) -> Inputs:
     cameras, issues = load_cameras(cfg)
     placements = load_layout(cfg.world.layout, cfg.world.fidelity)
-    types = {a.namespace: agent_type(a.type, where=f"agents[{a.namespace}].type") for a in cfg.agents}
-    for a in cfg.agents:
+    types = {a.namespace: agent_type(a.type, where=f"agents.{a.namespace}.type") for a in cfg.agent_list}
+    for a in cfg.agent_list:
         check_spawn_pose(a, types[a.namespace], cfg.world.fidelity)
-    return Inputs(cameras, issues, placements, types)
+    nav = cfg.navigation
+    if nav.map == "simlan":
+        grid = grid_from_nav2_map(MAPS_DIR / "warehouse.yaml", resolution_m=nav.resolution_m)
+    else:
+        grid = grid_from_world(placements, resolution_m=nav.resolution_m)
+    for a in cfg.agent_list:
+        kind = types[a.namespace]
+        if kind.drive != "diff":
+            continue
+        clearance = grid.clearance_m()
+        for i, goal in enumerate(a.goals):
+            cell = grid.to_cell(goal)
+            if not grid.inside(cell) or clearance[cell] < kind.half_width_m:
+                raise ConfigError(
+                    f"invalid agents.{a.namespace}.goals[{i}]={list(goal)}",
+                    "config",
+                    "the goal is inside an obstacle or outside the map",
+                    "pick a goal on free floor (see the occupancy grid in report.md)",
+                )
+    return Inputs(cameras, issues, placements, types, grid)
 
 
 def footprint_corners(kind: AgentType, pose: list[float]) -> np.ndarray:
@@ -109,7 +132,7 @@ def check_spawn_pose(agent: AgentConfig, kind: AgentType, fidelity: str) -> None
         or corners[:, 1].max() > by1
     ):
         raise ConfigError(
-            f"invalid agents[{agent.namespace}].pose={list(agent.pose)}",
+            f"invalid agents.{agent.namespace}.pose={list(agent.pose)}",
             "config",
             f"the robot's footprint leaves the building (x {bx0}..{bx1}, y {by0}..{by1} m)",
             "move it inside the building",
@@ -124,7 +147,7 @@ class Scene:
     world: WorldBodies
     cameras: list[CameraModel]
     renderers: list[CameraRenderer]
-    agents: list[DiffDriveAgent]
+    agents: list[Agent]
     labels: LabelTable
     names: dict[int, str] = field(default_factory=dict)
     _baked: dict[int, tuple] = field(default_factory=dict)
@@ -158,7 +181,7 @@ class Scene:
         labels = LabelTable()
         for body, label in world.labels.items():
             labels.set(body, label)
-        for agent in cfg.agents:
+        for agent in cfg.agent_list:
             _check_spawn_clear(cid, agent, inputs.agent_types[agent.namespace], world)
         cam_cfg = cfg.cameras
         renderers = [
@@ -176,10 +199,9 @@ class Scene:
         if cfg.render.layered:  # static layers: the world as it stands, before any agent exists
             for r in renderers:
                 r.render_static()
-        agents = []
-        for a in cfg.agents:
-            assert a.marker_id is not None
-            agent = DiffDriveAgent(
+        agents: list[Agent] = []
+        for a in cfg.agent_list:
+            agent = spawn_agent(
                 cid, a.namespace, inputs.agent_types[a.namespace], pose=list(a.pose), marker_id=a.marker_id
             )
             agent.apply_command(0.0, 0.0)
@@ -279,7 +301,7 @@ def _check_spawn_clear(client: int, agent: AgentConfig, kind: AgentType, world: 
         )
         if hits:
             raise ConfigError(
-                f"invalid agents[{agent.namespace}].pose={list(agent.pose)}",
+                f"invalid agents.{agent.namespace}.pose={list(agent.pose)}",
                 "config",
                 f"the robot's footprint overlaps '{world.names[body]}'",
                 "move it to a free spot of the floor",

@@ -3,9 +3,11 @@
 One physics step at a time (``world.physics_hz``); every rate is a whole number of steps::
 
     step k, t = k / physics_hz
-      control tick   agents: ground-truth pose -> follower -> cmd_vel -> wheel motors; collisions
       truth tick     /clock, /ground_truth/poses
-      camera tick    movable AABBs -> layered render per camera -> encode (worker threads) -> bag
+      camera tick    layered render per camera -> encode (workers) -> bag
+                     JPEG -> localizer (search, detect, fuse) -> /camera_<id>/marker_detections
+      control tick   estimates -> coordinator -> navigators -> cmd_vel -> wheel motors;
+                     collision sensing; /tf, /<ns>/pose_estimate, plan, goal, status
       physics step
 """
 
@@ -14,48 +16,28 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+
+import cv2
+import numpy as np
 
 from .. import __version__
 from .._pybullet import pb
 from ..config import Config
 from ..constants import FORMAT_VERSION, NS_PER_S
-from ..geometry.transforms import Transform
-from ..gpss.follower import FollowerParams, WaypointFollower
+from ..evaluation.replay import camera_from_messages
+from ..gpss.localization import LocalizerParams
+from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
 from ..recording import messages as M
-from ..recording import schema
 from ..recording.writer import NullWriter, RecordingWriter
-from ..world.labels import SEMANTIC_CLASSES
 from .camera_recording import CameraRecorder
+from .publishing import Publisher, camera_tf
 from .scene import Inputs, Scene
-
-DEPENDENCIES = (
-    "pybullet",
-    "rosbags",
-    "mcap",
-    "opencv-python-headless",
-    "numpy",
-    "scipy",
-    "polars",
-    "hydra-core",
-    "omegaconf",
-)
-
-
-def dependency_versions() -> dict[str, str]:
-    out = {}
-    for name in DEPENDENCIES:
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = "not installed"
-    return out
 
 
 @dataclass
 class RunStats:
-    """What a run measured; becomes metrics.json."""
+    """What a run measured besides what the recording holds; part of metrics.json."""
 
     sim_duration_ns: int = 0
     wall_s: float = 0.0
@@ -63,15 +45,15 @@ class RunStats:
     camera_frames: int = 0
     camera_frames_changed: int = 0
     render_wall_s: float = 0.0
+    localize_wall_s: float = 0.0
     renderer: str = ""
     collisions: dict[str, int] = field(default_factory=dict)
-    goals_reached: dict[str, int] = field(default_factory=dict)
-    goals_total: dict[str, int] = field(default_factory=dict)
     distance_m: dict[str, float] = field(default_factory=dict)
     message_counts: dict[str, int] = field(default_factory=dict)
     byte_counts: dict[str, int] = field(default_factory=dict)
     calibration_issues: list[str] = field(default_factory=list)
     layout_notes: list[str] = field(default_factory=list)
+    navigation: dict[str, object] = field(default_factory=dict)  # namespace -> NavigationStatus
     recording_bytes: int = 0
 
     def metrics(self) -> dict[str, float]:
@@ -84,6 +66,7 @@ class RunStats:
             "sim.camera_frames": float(self.camera_frames),
             "sim.camera_frames_changed": float(self.camera_frames_changed),
             "sim.render_wall_s": self.render_wall_s,
+            "sim.localize_wall_s": self.localize_wall_s,
             "agents.collisions": float(sum(self.collisions.values())),
             "recording.bytes": float(self.recording_bytes),
             "recording.messages": float(sum(self.message_counts.values())),
@@ -91,8 +74,6 @@ class RunStats:
         for ns in sorted(self.collisions):
             out[f"agents.{ns}.collisions"] = float(self.collisions[ns])
             out[f"agents.{ns}.distance_m"] = round(self.distance_m.get(ns, 0.0), 6)
-            out[f"agents.{ns}.waypoints_reached"] = float(self.goals_reached.get(ns, 0))
-            out[f"agents.{ns}.waypoints_total"] = float(self.goals_total.get(ns, 0))
         return out
 
 
@@ -125,6 +106,7 @@ class Simulation:
                 RecordingWriter(
                     bag_path,
                     compression=cfg.recording.compression,
+                    compression_level=cfg.recording.compression_level,
                     flush_period_ns=int(cfg.recording.flush_period_s * NS_PER_S),
                     encode_threads=cfg.recording.encode_threads,
                 )
@@ -132,11 +114,14 @@ class Simulation:
                 else NullWriter()
             )
             with writer:
-                writer.set_metadata("simlan.format_version", FORMAT_VERSION)
-                writer.set_metadata("simlan.version", __version__)
-                writer.set_metadata("simlan.seed", str(cfg.seed))
-                writer.set_metadata("simlan.scenario", cfg.scenario.name)
-                writer.set_metadata("simlan.renderer", scene.client.backend)
+                for key, value in (
+                    ("format_version", FORMAT_VERSION),
+                    ("version", __version__),
+                    ("seed", str(cfg.seed)),
+                    ("scenario", cfg.scenario.name),
+                    ("renderer", scene.client.backend),
+                ):
+                    writer.set_metadata(f"simlan.{key}", value)
                 wall0 = time.perf_counter()
                 self._loop(scene, writer, stats, progress)
                 stats.wall_s = time.perf_counter() - wall0
@@ -148,23 +133,58 @@ class Simulation:
             scene.close()
         return stats
 
+    def _stack(self, scene: Scene) -> GpssStack:
+        """The GPSS algorithms, on camera models rebuilt from the messages the bag holds (as replay does)."""
+        cfg = self.cfg
+        cameras = {
+            c.camera_id: camera_from_messages(M.camera_info(0, c), camera_tf(c).transform, c.camera_id)
+            for c in scene.cameras
+        }
+        plans = [
+            AgentPlan(
+                a.namespace,
+                a.number,
+                self.inputs.agent_types[a.namespace],
+                a.marker_id,
+                [list(g) for g in a.goals],
+                a.speed_mps,
+                a.loop,
+                (float(a.pose[0]), float(a.pose[1]), float(a.pose[2])),
+            )
+            for a in cfg.agent_list
+        ]
+        nav = cfg.navigation
+        loc = cfg.localization
+        return GpssStack(
+            plans,
+            cameras,
+            self.inputs.grid,
+            nav=NavigationParams(
+                nav.clearance_m,
+                nav.lookahead_m,
+                nav.goal_tolerance_m,
+                nav.max_yaw_rate_rps,
+                nav.coordination,
+                nav.safety_distance_m,
+            ),
+            loc=LocalizerParams(
+                method=loc.method,
+                unobserved_timeout_s=loc.unobserved_timeout_s,
+                lost_timeout_s=loc.lost_timeout_s,
+                processing_delay_s=loc.processing_delay_s,
+                bias_m=tuple(loc.bias_m),
+            ),
+            source=loc.source,
+        )
+
     # --------------------------------------------------------------------------- the loop
     def _loop(
         self, scene: Scene, writer: RecordingWriter, stats: RunStats, progress: Callable[[float], None] | None
     ) -> None:
         cfg = self.cfg
-        self._publish_static(scene, writer)
-        agent_topics = {a.namespace: schema.agent_topics(a.namespace) for a in scene.agents}
-        followers = {
-            a.namespace: WaypointFollower(ac.waypoints, FollowerParams(speed_mps=ac.speed_mps), loop=ac.loop)
-            for a, ac in zip(scene.agents, cfg.agents)
-        }
-        for ac in cfg.agents:
-            stats.goals_total[ac.namespace] = len(ac.waypoints)
-            stats.collisions[ac.namespace] = 0
-            stats.distance_m[ac.namespace] = 0.0
-        in_contact = {a.namespace: False for a in scene.agents}
-        last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
+        pub = Publisher(writer, cfg, scene.agents)
+        pub.static(config_yaml=self.config_yaml, renderer=scene.client.backend, cameras=scene.cameras)
+        stack = self._stack(scene)
         recorder = CameraRecorder(
             writer,
             cfg.recording,
@@ -172,100 +192,85 @@ class Simulation:
             depth_every=self.depth_every,
             semantic_every=self.semantic_every,
         )
+        for a in scene.agents:
+            stats.collisions[a.namespace] = 0
+            stats.distance_m[a.namespace] = 0.0
+        in_contact = {a.namespace: False for a in scene.agents}
+        last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
         ignore = scene.world.floor
         dt_control = self.control_every / self.physics_hz
         cid = scene.client.id
         for step in range(self.steps + 1):
             t = self.stamp_ns(step)
-            if step % self.control_every == 0:
-                for agent in scene.agents:
-                    ns, topics = agent.namespace, agent_topics[agent.namespace]
-                    pose = agent.pose()
-                    xy = pose.translation[:2]
-                    stats.distance_m[ns] += float(((xy - last_xy[ns]) ** 2).sum() ** 0.5)
-                    last_xy[ns] = xy.copy()
-                    cmd = followers[ns].step(float(xy[0]), float(xy[1]), pose.yaw(), dt_control)
-                    v, w = agent.apply_command(cmd.linear_mps, cmd.angular_rps)
-                    stats.goals_reached[ns] = followers[ns].reached
-                    writer.write(topics["cmd_vel"], t, M.twist_stamped(t, schema.base_link_frame(ns), v, w))
-                    hit = agent.collisions(ignore, scene.names)
-                    if hit.in_collision and not in_contact[ns]:
-                        stats.collisions[ns] += 1
-                    in_contact[ns] = hit.in_collision
-                    writer.write(
-                        topics["collision"],
-                        t,
-                        M.collision_state(
-                            t,
-                            schema.base_link_frame(ns),
-                            in_collision=hit.in_collision,
-                            max_force_n=hit.max_force_n,
-                            total_force_n=hit.total_force_n,
-                            others=hit.others,
-                        ),
-                    )
             if step % self.truth_every == 0:
-                writer.write(_topic(schema.CLOCK), t, M.clock(t))
-                poses = [
-                    M.transform_stamped(t, schema.MAP_FRAME, schema.base_link_frame(a.namespace), a.pose())
-                    for a in scene.agents
-                ]
-                writer.write(_topic(schema.GROUND_TRUTH_POSES), t, M.tf_message(poses))
+                pub.ground_truth(t)
             if step % self.camera_every == 0:
                 render0 = time.perf_counter()
                 scene.refresh_static_layers()
                 aabbs = scene.agent_aabbs()
+                frames = []
                 for renderer in scene.renderers:
                     images = renderer.render(aabbs)
                     stats.camera_frames += 1
                     stats.camera_frames_changed += int(images.changed)
-                    recorder.record(t, step // self.camera_every, renderer.camera, images)
-                stats.render_wall_s += time.perf_counter() - render0
+                    frames.append(
+                        (
+                            renderer.camera,
+                            images,
+                            recorder.record(t, step // self.camera_every, renderer.camera, images),
+                        )
+                    )
+                loc0 = time.perf_counter()
+                stats.render_wall_s += loc0 - render0
+                for camera, images, encoded in frames:
+                    # the localizer sees what the bag holds (decoded JPEG), so replay can reproduce it
+                    if encoded is not None and encoded.result() is not None:
+                        mode = stack.camera_frame(t, camera.camera_id, jpeg=encoded.result()[1])
+                    else:
+                        mode = stack.camera_frame(
+                            t, camera.camera_id, gray=cv2.cvtColor(images.rgb, cv2.COLOR_RGB2GRAY)
+                        )
+                    if mode is not None:
+                        pub.detections(
+                            t, camera, stack.localizer.last_detections.get(camera.camera_id, []), mode
+                        )
+                stack.close_camera_tick(t)
+                stats.localize_wall_s += time.perf_counter() - loc0
                 if progress is not None:
                     progress(t / NS_PER_S)
+            if step % self.control_every == 0:
+                truth = {}
+                for agent in scene.agents:
+                    pose = agent.pose()
+                    truth[agent.namespace] = (
+                        float(pose.translation[0]),
+                        float(pose.translation[1]),
+                        pose.yaw(),
+                    )
+                    xy = pose.translation[:2]
+                    stats.distance_m[agent.namespace] += float(np.linalg.norm(xy - last_xy[agent.namespace]))
+                    last_xy[agent.namespace] = xy.copy()
+                out = stack.control(t, dt_control, truth)
+                if stack.source == "camera":
+                    pub.estimates(t, out.estimates, stack.localizer.namespaces)
+                for agent in scene.agents:
+                    ns = agent.namespace
+                    v, w = agent.apply_command(*out.commands.get(ns, (0.0, 0.0)))
+                    stack.localizer.command(t, ns, v, w)
+                    hit = agent.collisions(ignore, scene.names)
+                    if hit.in_collision and not in_contact[ns]:
+                        stats.collisions[ns] += 1
+                    in_contact[ns] = hit.in_collision
+                    pub.command(t, ns, v, w, hit)
+                    nav = stack.navigators.get(ns)
+                    if nav is not None:
+                        decision = out.decisions.get(ns)
+                        pub.navigation(t, ns, nav, decision.blocked_by if decision is not None else ())
             if step < self.steps:
+                for agent in scene.agents:
+                    agent.step_kinematics(1.0 / self.physics_hz)
                 pb.stepSimulation(physicsClientId=cid)
                 stats.physics_steps += 1
         stats.sim_duration_ns = self.stamp_ns(self.steps)
-
-    def _publish_static(self, scene: Scene, writer: RecordingWriter) -> None:
-        cfg = self.cfg
-        writer.write(_topic(schema.CONFIG), 0, M.string(self.config_yaml))
-        info = M.run_info(
-            format_version=FORMAT_VERSION,
-            version=__version__,
-            scenario=cfg.scenario.name,
-            seed=cfg.seed,
-            renderer=scene.client.backend,
-            renderer_info=f"{'layered' if cfg.render.layered else 'full'}; distortion {'on' if cfg.cameras.distortion else 'off'}; near {cfg.cameras.near_m} m",
-            dependencies=dependency_versions(),
-        )
-        writer.write(_topic(schema.RUN_INFO), 0, info)
-        writer.write(_topic(schema.SEMANTIC_LABELS), 0, M.semantic_labels(dict(SEMANTIC_CLASSES)))
-        static = [
-            M.transform_stamped(0, schema.MAP_FRAME, c.frame_id, c.world_from_camera) for c in scene.cameras
-        ]
-        for agent in scene.agents:
-            static.append(
-                M.transform_stamped(
-                    0,
-                    schema.MAP_FRAME,
-                    schema.odom_frame(agent.namespace),
-                    Transform.from_pose2d(*agent.pose().translation[:2], agent.pose().yaw()),
-                )
-            )
-        writer.write(_topic(schema.TF_STATIC), 0, M.tf_message(static))
-        for agent, ac in zip(scene.agents, cfg.agents):
-            if ac.waypoints:
-                writer.write(
-                    schema.agent_topics(agent.namespace)["plan"],
-                    0,
-                    M.path(0, schema.MAP_FRAME, [list(w) for w in ac.waypoints]),
-                )
-
-
-def _topic(name: str) -> schema.Topic:
-    for t in schema.GLOBAL_TOPICS:
-        if t.name == name:
-            return t
-    raise KeyError(name)
+        stats.navigation = {ns: nav.status for ns, nav in stack.navigators.items()}
+        self.stack = stack

@@ -120,10 +120,15 @@ def shelf_parts() -> tuple[Part, ...]:
             parts.append(
                 _box(post, post, 1.5, cx + sx * (lx / 2 - post), cy + sy * (ly / 2 - post), 1.5, RACK_BLUE)
             )
+    # beams run between the posts and decks sit 2 mm below the beams' tops with 1 mm gaps: parts of
+    # different colours never share a face (the 16-bit depth buffer would let either win)
+    beam_half = lx / 2 - 2 * post - 0.001
     for level in (1.0, 2.0):
         for sy in (-1, 1):
-            parts.append(_box(lx / 2, 0.03, 0.05, cx, cy + sy * (ly / 2 - 0.03), level - 0.05, RACK_ORANGE))
-        parts.append(_box(lx / 2 - 0.05, ly / 2 - 0.06, 0.015, cx, cy, level - 0.015, DECK_GREY))
+            parts.append(
+                _box(beam_half, 0.03, 0.05, cx, cy + sy * (ly / 2 - 0.03), level - 0.05, RACK_ORANGE)
+            )
+        parts.append(_box(beam_half, ly / 2 - 0.061, 0.015, cx, cy, level - 0.017, DECK_GREY))
     return tuple(parts)
 
 
@@ -131,7 +136,8 @@ def box_parts() -> tuple[Part, ...]:
     """Cardboard box 1.185 x 0.785 x 1.01 m with a darker tape stripe on top (bottom at z = 0)."""
     return (
         _box(1.185 / 2, 0.785 / 2, 1.01 / 2, z=1.01 / 2, rgba=CARDBOARD),
-        _box(1.185 / 2 + 0.001, 0.04, 0.002, z=1.01 + 0.001, rgba=(0.55, 0.40, 0.25, 1.0), collide=False),
+        # the tape stands 1 cm proud: the 16-bit depth buffer cannot separate a thinner layer
+        _box(1.185 / 2 + 0.001, 0.04, 0.005, z=1.01 + 0.005, rgba=(0.55, 0.40, 0.25, 1.0), collide=False),
     )
 
 
@@ -144,8 +150,8 @@ def pallet_parts() -> tuple[Part, ...]:
 
 
 def floor_marking_parts(length_m: float, width_m: float, *, striped: bool) -> tuple[Part, ...]:
-    """Painted floor line along x, 1 cm proud (16-bit depth buffer); striped alternate with black."""
-    hz, z = 0.005, 0.005
+    """Painted floor line along x, 2 cm proud (16-bit depth buffer); striped alternate with black."""
+    hz, z = 0.01, 0.01
     if not striped:
         return (_box(length_m / 2, width_m / 2, hz, z=z, rgba=SAFETY_YELLOW, collide=False),)
     n = max(1, round(length_m / 0.5))
@@ -285,7 +291,7 @@ MODEL_SPECS: dict[str, ModelSpec] = {
         ),
     ),
     "concrete_ground": ModelSpec(
-        "floor", "floor", (_box(10.0, 5.0, 0.004, z=0.004, rgba=(0.50, 0.50, 0.49, 1.0), collide=False),)
+        "floor", "floor", (_box(10.0, 5.0, 0.0075, z=0.0075, rgba=(0.50, 0.50, 0.49, 1.0), collide=False),)
     ),
     "factory": ModelSpec("wall", "structure", wall_parts(), world_frame=True),
     "shelf": ModelSpec("shelf", "shelf", shelf_parts()),

@@ -1,0 +1,209 @@
+"""Localization and navigation metrics from a recording (or from replayed estimates).
+
+Tables are polars DataFrames keyed by ``stamp_ns``. The same functions score a live run (from
+its bag) and a replay (its recomputed estimates against the bag's ground truth), so that a replay
+with the same algorithm version reproduces the live metrics exactly.
+
+Localization (per agent and overall, at control ticks):
+- ``ate_xy_rmse_m``, ``ate_xy_max_m``: absolute trajectory error of base_link in the plane, no
+  alignment (the cameras are fixed in the world), over ticks with a valid estimate;
+- ``yaw_rmse_deg``;
+- ``availability``: share of control ticks with a fresh estimate (``observed``) among the ticks
+  at which the marker is in at least one camera's view (from ground truth: all four corners on
+  valid pixels inside the image, facing the camera, at least ``MIN_SIDE_PX`` wide);
+- ``latency_s``: mean age of the newest fix (image capture to the tick that uses it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import polars as pl
+
+from ..agent_types import MARKER_SIZE_M, AgentType
+from ..constants import NS_PER_S
+from ..geometry.camera import CameraModel
+from ..geometry.rotations import wrap_angle
+from ..geometry.transforms import Transform
+from ..gpss.markers import marker_corners_in_marker_frame
+from ..recording import schema
+from ..recording.reader import RecordingReader
+
+MIN_SIDE_PX = 10.0
+
+POSE_SCHEMA = {"stamp_ns": pl.Int64, "x": pl.Float64, "y": pl.Float64, "yaw": pl.Float64}
+
+
+def _yaw(q: object) -> float:
+    x, y, z, w = q.x, q.y, q.z, q.w  # type: ignore[attr-defined]
+    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def ground_truth(reader: RecordingReader) -> dict[str, pl.DataFrame]:
+    """map -> base_link of every agent from /ground_truth/poses."""
+    rows: dict[str, list[tuple]] = {}
+    for m in reader.messages([schema.GROUND_TRUTH_POSES]):
+        for tf in m.msg.transforms:
+            ns = tf.child_frame_id.split("/")[0]
+            p = tf.transform.translation
+            rows.setdefault(ns, []).append((m.stamp_ns, p.x, p.y, _yaw(tf.transform.rotation)))
+    return {ns: pl.DataFrame(r, schema=POSE_SCHEMA, orient="row") for ns, r in rows.items()}
+
+
+def estimates_from_recording(reader: RecordingReader, namespaces: Iterable[str]) -> dict[str, pl.DataFrame]:
+    """Pose estimates joined with localization status, per agent: stamp, x, y, yaw, observed, valid, age."""
+    out = {}
+    for ns in namespaces:
+        topics = schema.agent_topics(ns)
+        est = [
+            (
+                m.stamp_ns,
+                m.msg.pose.pose.position.x,
+                m.msg.pose.pose.position.y,
+                _yaw(m.msg.pose.pose.orientation),
+            )
+            for m in reader.messages([topics["pose_estimate"].name])
+        ]
+        status = [
+            (m.stamp_ns, m.msg.observed, m.msg.valid, m.msg.fix_age_s)
+            for m in reader.messages([topics["localization"].name])
+        ]
+        out[ns] = status_table(est, status)
+    return out
+
+
+def status_table(estimates: list[tuple], status: list[tuple]) -> pl.DataFrame:
+    est = pl.DataFrame(estimates, schema=POSE_SCHEMA, orient="row")
+    st = pl.DataFrame(
+        status,
+        schema={"stamp_ns": pl.Int64, "observed": pl.Boolean, "valid": pl.Boolean, "age_s": pl.Float64},
+        orient="row",
+    )
+    return st.join(est, on="stamp_ns", how="left").sort("stamp_ns")
+
+
+@dataclass(frozen=True)
+class Visibility:
+    cameras: dict[str, CameraModel]
+    kind: AgentType
+
+    def in_view(self, x: float, y: float, yaw: float) -> bool:
+        assert self.kind.marker_xyz is not None
+        mx, my, mz = self.kind.marker_xyz
+        marker = Transform.from_pose2d(x, y, yaw) @ Transform.from_pose2d(mx, my, 0.0, mz)
+        corners = marker.apply(marker_corners_in_marker_frame(MARKER_SIZE_M))
+        for cam in self.cameras.values():
+            if cam.position[2] <= mz:
+                continue
+            uv, ok = cam.project(corners)
+            if (
+                not ok.all()
+                or (uv < 0).any()
+                or (uv[:, 0] > cam.width - 1).any()
+                or (uv[:, 1] > cam.height - 1).any()
+            ):
+                continue
+            _, ok_px = cam.undistort_pixels(uv)
+            side = float(np.mean(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1)))
+            if ok_px.all() and side >= MIN_SIDE_PX:
+                return True
+        return False
+
+
+def localization_metrics(
+    truth: dict[str, pl.DataFrame], estimates: dict[str, pl.DataFrame], visibility: dict[str, Visibility]
+) -> dict[str, float]:
+    """``localization.*`` over all agents with a marker, and per agent ``localization.<ns>.*``."""
+    out: dict[str, float] = {}
+    all_err, all_yaw, all_avail, all_age = [], [], [], []
+    for ns in sorted(estimates):
+        table = estimates[ns].join(
+            truth[ns].rename({"x": "gx", "y": "gy", "yaw": "gyaw"}), on="stamp_ns", how="inner"
+        )
+        valid = table.filter(pl.col("valid") & pl.col("x").is_not_null())
+        err = np.hypot((valid["x"] - valid["gx"]).to_numpy(), (valid["y"] - valid["gy"]).to_numpy())
+        yaw_err = np.degrees(np.abs(wrap_angle((valid["yaw"] - valid["gyaw"]).to_numpy())))
+        vis = visibility[ns]
+        in_view = np.array(
+            [vis.in_view(gx, gy, gyaw) for gx, gy, gyaw in table.select("gx", "gy", "gyaw").iter_rows()],
+            dtype=bool,
+        )
+        observed = table["observed"].to_numpy()
+        avail = observed[in_view] if in_view.any() else np.array([])
+        ages = valid["age_s"].to_numpy()
+        prefix = f"localization.{ns}."
+        out[prefix + "ate_xy_rmse_m"] = float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")
+        out[prefix + "ate_xy_max_m"] = float(err.max()) if len(err) else float("nan")
+        out[prefix + "yaw_rmse_deg"] = float(np.sqrt(np.mean(yaw_err**2))) if len(yaw_err) else float("nan")
+        out[prefix + "availability"] = float(avail.mean()) if len(avail) else float("nan")
+        out[prefix + "latency_s"] = float(ages.mean()) if len(ages) else float("nan")
+        out[prefix + "ticks_in_view"] = float(in_view.sum())
+        out[prefix + "ticks_valid"] = float(len(valid))
+        all_err.append(err)
+        all_yaw.append(yaw_err)
+        all_avail.append(avail)
+        all_age.append(ages)
+    if estimates:
+        err, yaw_err, avail, ages = (
+            np.concatenate(a) if a else np.array([]) for a in (all_err, all_yaw, all_avail, all_age)
+        )
+        out["localization.ate_xy_rmse_m"] = float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")
+        out["localization.ate_xy_max_m"] = float(err.max()) if len(err) else float("nan")
+        out["localization.yaw_rmse_deg"] = (
+            float(np.sqrt(np.mean(yaw_err**2))) if len(yaw_err) else float("nan")
+        )
+        out["localization.availability"] = float(avail.mean()) if len(avail) else float("nan")
+        out["localization.latency_s"] = float(ages.mean()) if len(ages) else float("nan")
+    return out
+
+
+def navigation_metrics(
+    reader: RecordingReader, truth: dict[str, pl.DataFrame], namespaces: Iterable[str]
+) -> dict[str, float]:
+    """``navigation.*`` from the recorded navigation status, collision sensor and ground truth."""
+    out: dict[str, float] = {}
+    reached = total = collisions = 0
+    ratios = []
+    for ns in namespaces:
+        topics = schema.agent_topics(ns)
+        last = None
+        for m in reader.messages([topics["navigation"].name]):
+            last = m.msg
+        hits = 0
+        prev = False
+        for m in reader.messages([topics["collision"].name]):
+            if m.msg.in_collision and not prev:
+                hits += 1
+            prev = m.msg.in_collision
+        gt = truth.get(ns)
+        driven = (
+            float(np.sum(np.hypot(np.diff(gt["x"].to_numpy()), np.diff(gt["y"].to_numpy()))))
+            if gt is not None and gt.height > 1
+            else 0.0
+        )
+        prefix = f"navigation.{ns}."
+        g_reached = int(last.goals_reached) if last is not None else 0
+        g_total = int(last.goals_total) if last is not None else 0
+        planned = float(last.planned_length_m) if last is not None else 0.0
+        out[prefix + "goals_reached"] = float(g_reached)
+        out[prefix + "goals_total"] = float(g_total)
+        out[prefix + "collisions"] = float(hits)
+        out[prefix + "driven_m"] = driven
+        if planned > 0 and g_reached == g_total:
+            out[prefix + "path_length_ratio"] = driven / planned
+            ratios.append(driven / planned)
+        reached += g_reached
+        total += g_total
+        collisions += hits
+    out["navigation.goals_reached"] = float(reached)
+    out["navigation.goals_total"] = float(total)
+    out["navigation.collisions"] = float(collisions)
+    if ratios:
+        out["navigation.path_length_ratio"] = float(np.mean(ratios))
+    return out
+
+
+def seconds(stamp_ns: int) -> float:
+    return stamp_ns / NS_PER_S

@@ -1,0 +1,400 @@
+"""Camera-based localization of marker-carrying agents (GPSS): detect, fuse, filter.
+
+Data flow per camera tick (live and replay run exactly this)::
+
+    JPEG bytes per camera --search plan (tracked: regions around each predicted marker;
+        |                   untracked agent: the full frame)--> decode (grey) -> ArUco detect
+        v
+    detections -> per-camera marker pose (ground constraint or PnP) -> fusion across cameras
+        v
+    fix (base_link pose in map, image stamp) --(processing delay)--> per-agent EKF (unicycle,
+        constant velocity) --> estimate at every control tick: pose, covariance, age, observed
+
+Pure numpy/OpenCV: no simulator, no file format.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from ..constants import NS_PER_S
+from ..geometry.camera import CameraModel
+from ..geometry.rotations import wrap_angle
+from ..geometry.transforms import Transform
+from .markers import (
+    POSE_METHODS,
+    Detection,
+    MarkerDetector,
+    MarkerMount,
+    MarkerObservation,
+    fuse,
+    marker_corners_in_marker_frame,
+)
+
+Roi = tuple[int, int, int, int]
+
+
+@dataclass(frozen=True)
+class LocalizerParams:
+    method: str = "ground"  # ground (ray / marker-plane intersection) | pnp (IPPE_SQUARE)
+    unobserved_timeout_s: float = 0.5  # no fix for longer: the agent is unobserved
+    lost_timeout_s: float = 1.5  # no fix for longer: estimate withheld, full-frame search
+    processing_delay_s: float = 0.0  # image capture -> fix usable by the filter
+    accel_noise_mps2: float = 0.25  # how far the robot strays from its commanded speed (m/s^2)
+    yaw_accel_noise_rps2: float = 0.4  # and from its commanded yaw rate (rad/s^2)
+    gate_sigma: float = 8.0  # fixes farther than this (Mahalanobis) from the prediction are outliers
+    roi_margin_px: int = 24
+    full_search_every: int = (
+        5  # while an agent is untracked, search each camera's whole image every n-th frame (staggered)
+    )
+    min_side_px: float = 8.0  # smaller detections are too noisy to use
+    bias_m: tuple[float, float] = (0.0, 0.0)  # fault injection: added to every fix
+
+
+@dataclass(frozen=True)
+class PoseFix:
+    """A fused base_link pose in map from one frame set (image stamp)."""
+
+    namespace: str
+    stamp_ns: int
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    sigma_xy_m: float
+    sigma_yaw_rad: float
+    cameras: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """The filter's pose at a control tick."""
+
+    namespace: str
+    stamp_ns: int
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    speed_mps: float
+    yaw_rate_rps: float
+    covariance: NDArray[np.float64]  # 3x3 over (x, y, yaw)
+    last_fix_ns: int
+    observed: bool  # a fix within unobserved_timeout_s
+    valid: bool  # a fix within lost_timeout_s
+    cameras: tuple[str, ...] = ()  # cameras of the newest fix
+
+    @property
+    def age_s(self) -> float:
+        return (self.stamp_ns - self.last_fix_ns) / NS_PER_S
+
+
+class UnicycleEKF:
+    """Extended Kalman filter over (x, y, yaw, v, w) of a differential-drive robot.
+
+    Between fixes the robot moves as commanded when its velocity commands are known (the central
+    GPSS node sent them), else at constant speed and yaw rate; the process noise covers how
+    well the robot tracks them.
+    """
+
+    def __init__(self, accel_noise: float, yaw_accel_noise: float) -> None:
+        self.q = np.array([accel_noise**2, yaw_accel_noise**2])
+        self.x = np.zeros(5)
+        self.P = np.eye(5)
+        self.t_ns: int | None = None
+        self.commands: list[tuple[int, float, float]] = []  # (from t_ns, v, w), time-ordered
+
+    def command(self, t_ns: int, v: float, w: float) -> None:
+        self.commands.append((t_ns, v, w))
+        if self.t_ns is not None:  # keep the command active at the filter's time and later ones
+            while len(self.commands) >= 2 and self.commands[1][0] <= self.t_ns:
+                self.commands.pop(0)
+
+    @staticmethod
+    def _move(x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
+        px, py, th, v, w = x
+        return np.array([px + v * np.cos(th) * dt, py + v * np.sin(th) * dt, th + w * dt, v, w])
+
+    def _propagate(
+        self, x: NDArray[np.float64], P: NDArray[np.float64], dt: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        th, v = x[2], x[3]
+        F = np.eye(5)
+        F[0, 2], F[0, 3] = -v * np.sin(th) * dt, np.cos(th) * dt
+        F[1, 2], F[1, 3] = v * np.cos(th) * dt, np.sin(th) * dt
+        F[2, 4] = dt
+        G = np.array(
+            [[0.5 * np.cos(th) * dt**2, 0], [0.5 * np.sin(th) * dt**2, 0], [0, 0.5 * dt**2], [dt, 0], [0, dt]]
+        )
+        return self._move(x, dt), F @ P @ F.T + G @ np.diag(self.q) @ G.T
+
+    def _predicted(self, t_ns: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        assert self.t_ns is not None
+        if t_ns <= self.t_ns:
+            return self.x.copy(), self.P.copy()
+        x, P = self.x.copy(), self.P.copy()
+        cuts = [c[0] for c in self.commands if self.t_ns < c[0] < t_ns]
+        times = [self.t_ns, *cuts, t_ns]
+        for a, b in itertools.pairwise(times):
+            active = [c for c in self.commands if c[0] <= a]
+            if active:
+                x[3], x[4] = active[-1][1], active[-1][2]
+            x, P = self._propagate(x, P, (b - a) / NS_PER_S)
+        return x, P
+
+    def reset(self, fix: PoseFix) -> None:
+        self.x = np.array([fix.x_m, fix.y_m, fix.yaw_rad, 0.0, 0.0])
+        self.P = np.diag([fix.sigma_xy_m**2, fix.sigma_xy_m**2, fix.sigma_yaw_rad**2, 1.0, 1.0])
+        self.t_ns = fix.stamp_ns
+
+    def update(self, fix: PoseFix, gate_sigma: float) -> bool:
+        """Predict to the fix's stamp and fuse it; False (and no change) if gated out."""
+        x, P = self._predicted(fix.stamp_ns)
+        innovation = np.array([fix.x_m - x[0], fix.y_m - x[1], float(wrap_angle(fix.yaw_rad - x[2]))])
+        R = np.diag([fix.sigma_xy_m**2, fix.sigma_xy_m**2, fix.sigma_yaw_rad**2])
+        S = P[:3, :3] + R
+        if float(innovation @ np.linalg.solve(S, innovation)) > gate_sigma**2:
+            return False
+        K = P[:, :3] @ np.linalg.inv(S)
+        self.x = x + K @ innovation
+        self.x[2] = float(wrap_angle(self.x[2]))
+        self.P = (np.eye(5) - K[:, :3] @ np.eye(3, 5)) @ P
+        self.P = 0.5 * (self.P + self.P.T)
+        self.t_ns = fix.stamp_ns
+        return True
+
+    def at(self, t_ns: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """State and covariance extrapolated to ``t_ns`` (the filter itself is unchanged)."""
+        return self._predicted(t_ns)
+
+
+@dataclass
+class _Track:
+    mount: MarkerMount
+    ekf: UnicycleEKF
+    last_fix_ns: int | None = None
+    last_cameras: tuple[str, ...] = ()
+    fixes: int = 0
+    rejected: int = 0
+
+
+@dataclass
+class FrameTiming:
+    """Processing time of one camera image by the localizer."""
+
+    camera_id: str
+    stamp_ns: int
+    mode: str  # "full" or "roi"
+    seconds: float
+    detections: int
+
+
+@dataclass
+class Localizer:
+    """Localize agents from their markers in the images of fixed, calibrated cameras."""
+
+    cameras: dict[str, CameraModel]
+    mounts: list[MarkerMount]
+    params: LocalizerParams = field(default_factory=LocalizerParams)
+
+    def __post_init__(self) -> None:
+        if self.params.method not in POSE_METHODS:
+            raise ValueError(
+                f"unknown localization method {self.params.method!r}; use one of {', '.join(POSE_METHODS)}"
+            )
+        self._pose = POSE_METHODS[self.params.method]
+        self._by_marker = {m.marker_id: m for m in self.mounts}
+        self._tracks = {
+            m.namespace: _Track(
+                m, UnicycleEKF(self.params.accel_noise_mps2, self.params.yaw_accel_noise_rps2)
+            )
+            for m in self.mounts
+        }
+        self._detector = MarkerDetector()
+        self._frame_obs: list[MarkerObservation] = []
+        self._pending: deque[tuple[int, PoseFix]] = deque()  # (usable from, fix)
+        self._full_cache: dict[tuple[str, bytes], list[Detection]] = {}
+        self._frames_seen: dict[str, int] = {}
+        self._frame_index: dict[tuple[str, int], int] = {}
+        self.timings: list[FrameTiming] = []
+        self.last_detections: dict[str, list[Detection]] = {}
+        self.last_observations: list[MarkerObservation] = []
+
+    # ---------------------------------------------------------------------------- searching
+    def _tracked(self, track: _Track, t_ns: int) -> bool:
+        return (
+            track.last_fix_ns is not None
+            and (t_ns - track.last_fix_ns) <= self.params.lost_timeout_s * NS_PER_S
+        )
+
+    def search_plan(self, t_ns: int, camera_id: str) -> str | list[Roi]:
+        """Where to search this camera's image at ``t_ns``.
+
+        Regions around every tracked agent's predicted marker; the whole image if an agent is not
+        tracked, on the first frame and then every ``full_search_every``-th frame of each camera
+        (staggered across cameras, so that a lost or hidden robot costs a few full searches a
+        second, not all of them).
+        """
+        frame = self._frame_index.get((camera_id, t_ns))
+        if frame is None:
+            frame = self._frames_seen.get(camera_id, 0)
+            self._frames_seen[camera_id] = frame + 1
+            self._frame_index = {k: v for k, v in self._frame_index.items() if k[0] != camera_id}
+            self._frame_index[(camera_id, t_ns)] = frame
+        untracked = any(not self._tracked(tr, t_ns) for tr in self._tracks.values())
+        slot = list(self.cameras).index(camera_id)
+        if untracked and (frame == 0 or (frame + slot) % self.params.full_search_every == 0):
+            return "full"
+        cam = self.cameras[camera_id]
+        rois: list[Roi] = []
+        for tr in self._tracks.values():
+            if not self._tracked(tr, t_ns):
+                continue
+            x, P = tr.ekf.at(t_ns)
+            m = tr.mount
+            base = Transform.from_pose2d(float(x[0]), float(x[1]), float(x[2]))
+            marker = base @ Transform.from_pose2d(m.offset_xy_m[0], m.offset_xy_m[1], 0.0, m.height_m)
+            corners = marker.apply(marker_corners_in_marker_frame(m.size_m))
+            uv, ok = cam.project(corners)
+            if not ok.all():
+                continue
+            rng = float(np.linalg.norm(marker.translation - cam.position))
+            sigma_m = float(np.sqrt(max(P[0, 0], P[1, 1]))) + 0.5 * m.size_m * float(np.sqrt(P[2, 2]))
+            margin = self.params.roi_margin_px + 3.0 * sigma_m * cam.K[0, 0] / max(rng, 1e-3)
+            u0, v0 = np.floor(uv.min(axis=0) - margin).astype(int)
+            u1, v1 = np.ceil(uv.max(axis=0) + margin).astype(int)
+            u0, v0, u1, v1 = max(0, u0), max(0, v0), min(cam.width, u1), min(cam.height, v1)
+            if u1 - u0 >= 8 and v1 - v0 >= 8:
+                rois.append((int(u0), int(v0), int(u1), int(v1)))
+        return rois
+
+    def process_image(
+        self, t_ns: int, camera_id: str, jpeg: bytes | None = None, gray: NDArray[np.uint8] | None = None
+    ) -> list[Detection]:
+        """Search one camera's image (JPEG bytes or a grey image) as planned; keep its observations."""
+        plan = self.search_plan(t_ns, camera_id)
+        if not plan:
+            return []
+        t0 = time.perf_counter()
+        key = (
+            (camera_id, hashlib.blake2b(jpeg, digest_size=16).digest())
+            if (plan == "full" and jpeg is not None)
+            else None
+        )
+        if key is not None and key in self._full_cache:
+            detections = self._full_cache[key]
+        else:
+            if gray is None:
+                assert jpeg is not None
+                gray = cv2.imdecode(np.frombuffer(jpeg, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+            if plan == "full":
+                detections = self._detector.detect(camera_id, gray)
+                if key is not None:
+                    self._full_cache = {k: v for k, v in self._full_cache.items() if k[0] != camera_id}
+                    self._full_cache[key] = detections
+            else:
+                found: dict[int, Detection] = {}
+                for roi in plan:
+                    for d in self._detector.detect(camera_id, gray, roi):
+                        found.setdefault(d.marker_id, d)
+                detections = [found[k] for k in sorted(found)]
+        for det in detections:
+            mount = self._by_marker.get(det.marker_id)
+            if mount is None:
+                continue
+            obs = self._pose(self.cameras[camera_id], det, mount)
+            if obs is not None and obs.side_px >= self.params.min_side_px:
+                self._frame_obs.append(obs)
+        self.last_detections[camera_id] = detections
+        self.timings.append(
+            FrameTiming(
+                camera_id,
+                t_ns,
+                "full" if plan == "full" else "roi",
+                time.perf_counter() - t0,
+                len(detections),
+            )
+        )
+        return detections
+
+    def close_frame(self, t_ns: int) -> list[PoseFix]:
+        """Fuse the observations of this frame set into one fix per agent."""
+        obs, self._frame_obs = self._frame_obs, []
+        self.last_observations = obs
+        fixes = []
+        for marker_id in sorted({o.marker_id for o in obs}):
+            mount = self._by_marker[marker_id]
+            group = [o for o in obs if o.marker_id == marker_id]
+            x, y, yaw, sxy, syaw = fuse(group)
+            c, s = np.cos(yaw), np.sin(yaw)
+            ox, oy = mount.offset_xy_m
+            bx, by = self.params.bias_m
+            fix = PoseFix(
+                mount.namespace,
+                t_ns,
+                x - (c * ox - s * oy) + bx,
+                y - (s * ox + c * oy) + by,
+                yaw,
+                sxy,
+                syaw,
+                tuple(sorted(o.camera_id for o in group)),
+            )
+            fixes.append(fix)
+            self._pending.append((t_ns + round(self.params.processing_delay_s * NS_PER_S), fix))
+        return fixes
+
+    # ----------------------------------------------------------------------------- filtering
+    def estimate(self, t_ns: int) -> dict[str, PoseEstimate]:
+        """Apply the fixes that are due, then every agent's pose at ``t_ns``."""
+        while self._pending and self._pending[0][0] <= t_ns:
+            _, fix = self._pending.popleft()
+            track = self._tracks[fix.namespace]
+            if track.last_fix_ns is None or not self._tracked(track, fix.stamp_ns):
+                track.ekf.reset(fix)
+            elif not track.ekf.update(fix, self.params.gate_sigma):
+                track.rejected += 1
+                continue
+            track.last_fix_ns = fix.stamp_ns
+            track.last_cameras = fix.cameras
+            track.fixes += 1
+        out = {}
+        for ns, track in self._tracks.items():
+            if track.last_fix_ns is None:
+                continue
+            x, P = track.ekf.at(t_ns)
+            age = (t_ns - track.last_fix_ns) / NS_PER_S
+            out[ns] = PoseEstimate(
+                ns,
+                t_ns,
+                float(x[0]),
+                float(x[1]),
+                float(wrap_angle(x[2])),
+                float(x[3]),
+                float(x[4]),
+                P[:3, :3].copy(),
+                track.last_fix_ns,
+                age <= self.params.unobserved_timeout_s,
+                age <= self.params.lost_timeout_s,
+                track.last_cameras,
+            )
+        return out
+
+    @property
+    def namespaces(self) -> list[str]:
+        return list(self._tracks)
+
+    def command(self, t_ns: int, namespace: str, linear_mps: float, angular_rps: float) -> None:
+        """Tell the filter the velocity command a robot got at ``t_ns`` (used between fixes)."""
+        track = self._tracks.get(namespace)
+        if track is not None:
+            track.ekf.command(t_ns, linear_mps, angular_rps)
+
+    def track_stats(self) -> dict[str, tuple[int, int]]:
+        """Per agent: (fixes used, fixes rejected by the gate)."""
+        return {ns: (t.fixes, t.rejected) for ns, t in self._tracks.items()}

@@ -1,0 +1,140 @@
+"""Navigation of one robot to its goals: plan on the grid, follow with pure pursuit, on estimates.
+
+Pure numpy: inputs are the robot's estimated pose and the coordinator's decision, the output is a
+velocity command. It never sees ground truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .coordinator import Decision, Intent
+from .follower import PathFollower, PursuitParams
+from .planner import GridPlanner, Plan, PlanningError
+
+DETOUR_MAX_FACTOR = 1.5
+DETOUR_MAX_EXTRA_M = 6.0
+
+
+@dataclass
+class NavigationStatus:
+    goals_total: int
+    goals_reached: int = 0
+    goals_failed: int = 0
+    state: str = "idle"  # idle | waiting_localization | waiting | following | done
+    planned_length_m: float = 0.0  # sum of the first plan's length of every goal
+    plans: int = 0
+    failures: list[str] = field(default_factory=list)
+
+
+class Navigator:
+    """Drive through ``goals`` in order (or in a loop)."""
+
+    def __init__(
+        self,
+        namespace: str,
+        goals: list[list[float]],
+        planner: GridPlanner,
+        pursuit: PursuitParams,
+        *,
+        loop: bool = False,
+    ) -> None:
+        self.namespace = namespace
+        self.goals = [np.asarray(g, dtype=float) for g in goals]
+        self.planner, self.pursuit, self.loop = planner, pursuit, loop
+        self.index = 0
+        self.follower: PathFollower | None = None
+        self.plan: Plan | None = None
+        self.new_plan = False  # set when a plan was made; the caller publishes and clears it
+        self.status = NavigationStatus(len(self.goals))
+        self._goal_first_plan = True
+
+    @property
+    def goal(self) -> NDArray[np.float64] | None:
+        if self.index >= len(self.goals):
+            return None
+        return self.goals[self.index]
+
+    def _make_plan(self, x: float, y: float, blocked: NDArray[np.bool_] | None = None) -> None:
+        goal = self.goal
+        assert goal is not None
+        try:
+            plan = self.planner.plan((x, y), (float(goal[0]), float(goal[1])), blocked=blocked)
+        except PlanningError as err:
+            if blocked is not None:  # no detour: keep the old plan and wait
+                return
+            self.status.failures.append(str(err))
+            self.status.goals_failed += 1
+            self._advance()
+            return
+        if blocked is not None and self.follower is not None:
+            remaining = self.follower.remaining_m()
+            if plan.length_m > DETOUR_MAX_FACTOR * remaining + DETOUR_MAX_EXTRA_M:
+                return  # a long way round (maybe out of camera coverage): rather wait
+        self.plan = plan
+        self.follower = PathFollower(self.plan.points_xy, self.pursuit)
+        self.status.plans += 1
+        if self._goal_first_plan:
+            self.status.planned_length_m += self.plan.length_m
+            self._goal_first_plan = False
+        self.new_plan = True
+
+    def _advance(self) -> None:
+        self.index += 1
+        if self.loop and self.index >= len(self.goals):
+            self.index = 0
+        self.follower, self.plan = None, None
+        self._goal_first_plan = True
+
+    def intent(
+        self,
+        pose_xyyaw: tuple[float, float, float] | None,
+        priority: int,
+        footprint_m: tuple[float, float, float, float],
+    ) -> Intent | None:
+        if pose_xyyaw is None:
+            return None
+        ahead = None
+        if self.follower is not None and not self.follower.done:
+            f = self.follower
+            start = f.remaining_m()
+            s0 = f.length_m - start
+            samples = np.arange(s0, min(f.length_m, s0 + 4.0) + 1e-9, 0.25)
+            ahead = np.vstack([[pose_xyyaw[0], pose_xyyaw[1]], np.array([f.point_at(s) for s in samples])])
+        return Intent(self.namespace, priority, pose_xyyaw, footprint_m, ahead)
+
+    def step(
+        self,
+        pose_xyyaw: tuple[float, float, float] | None,
+        dt_s: float,
+        decision: Decision | None = None,
+        *,
+        blocked: NDArray[np.bool_] | None = None,
+    ) -> tuple[float, float]:
+        """Twist for the next ``dt_s`` given the estimated pose (None: no valid estimate)."""
+        if self.goal is None:
+            self.status.state = "done"
+            return 0.0, 0.0
+        if pose_xyyaw is None:
+            self.status.state = "waiting_localization"
+            return 0.0, 0.0
+        x, y, yaw = pose_xyyaw
+        if self.follower is None:
+            self._make_plan(x, y)
+            if self.follower is None:
+                return 0.0, 0.0
+        if decision is not None and decision.replan and blocked is not None:
+            self._make_plan(x, y, blocked=blocked)
+        limit = None if decision is None else decision.speed_limit_mps
+        assert self.follower is not None
+        v, w = self.follower.step(x, y, yaw, dt_s, speed_limit_mps=limit)
+        self.status.state = "waiting" if limit == 0.0 else "following"
+        if self.follower.done:
+            self.status.goals_reached += 1
+            self._advance()
+            if self.goal is None:
+                self.status.state = "done"
+        return v, w

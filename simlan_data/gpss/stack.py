@@ -1,0 +1,191 @@
+"""The GPSS loop without the simulator: localize from cameras, coordinate, plan, follow.
+
+Data flow::
+
+    camera tick:  JPEG per camera --> Localizer (detect, fuse) --> fixes
+    control tick: Localizer.estimate --> poses --> Coordinator (who waits) --> Navigator per robot
+                  --> (v, w) per robot;  people (walkers) walk their waypoints on their own
+
+Robots never see ground truth unless ``localization.source=ground_truth`` is asked for.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from ..agent_types import MARKER_SIZE_M, AgentType
+from ..geometry.camera import CameraModel
+from .coordinator import Coordinator, Decision, Intent, swept_claim
+from .follower import FollowerParams, PursuitParams, WaypointFollower
+from .localization import Localizer, LocalizerParams, PoseEstimate
+from .markers import MarkerMount
+from .navigation import Navigator
+from .occupancy import OccupancyGrid
+from .planner import GridPlanner
+
+
+@dataclass(frozen=True)
+class AgentPlan:
+    """What the stack needs to know about one agent."""
+
+    namespace: str
+    number: int
+    kind: AgentType
+    marker_id: int | None
+    goals: list[list[float]]
+    speed_mps: float
+    loop: bool = False
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # where it was spawned (known to GPSS)
+
+
+@dataclass(frozen=True)
+class NavigationParams:
+    clearance_m: float = 0.4
+    lookahead_m: float = 1.2
+    goal_tolerance_m: float = 0.3
+    max_yaw_rate_rps: float = 0.8
+    coordination: bool = True
+    safety_distance_m: float = 0.6
+
+
+@dataclass
+class ControlOutput:
+    commands: dict[str, tuple[float, float]] = field(default_factory=dict)
+    estimates: dict[str, PoseEstimate] = field(default_factory=dict)
+    decisions: dict[str, Decision] = field(default_factory=dict)
+
+
+class GpssStack:
+    """Localization, coordination and navigation for every agent of a run."""
+
+    def __init__(
+        self,
+        agents: list[AgentPlan],
+        cameras: dict[str, CameraModel],
+        grid: OccupancyGrid,
+        *,
+        nav: NavigationParams,
+        loc: LocalizerParams,
+        source: str = "camera",
+    ) -> None:
+        self.agents = {a.namespace: a for a in agents}
+        self.grid, self.nav, self.source = grid, nav, source
+        mounts = [
+            MarkerMount(
+                a.namespace,
+                a.marker_id,
+                MARKER_SIZE_M,
+                a.kind.marker_xyz[2],
+                (a.kind.marker_xyz[0], a.kind.marker_xyz[1]),
+            )
+            for a in agents
+            if a.kind.has_marker and a.marker_id is not None and a.kind.drive == "diff"
+        ]
+        self.localizer = Localizer(cameras, mounts, loc)
+        self.coordinator = Coordinator(safety_distance_m=nav.safety_distance_m)
+        # the last pose GPSS knew of every robot: its spawn pose until the cameras first see it
+        self.last_known: dict[str, tuple[float, float, float]] = {a.namespace: a.pose for a in agents}
+        self.navigators: dict[str, Navigator] = {}
+        self.walkers: dict[str, WaypointFollower] = {}
+        planners: dict[float, GridPlanner] = {}
+        for a in agents:
+            if a.kind.drive == "diff":
+                radius = round(a.kind.half_width_m + nav.clearance_m, 3)
+                planner = planners.setdefault(radius, GridPlanner(grid, radius_m=radius))
+                pursuit = PursuitParams(
+                    max_speed_mps=min(a.speed_mps, a.kind.max_speed_mps),
+                    min_lookahead_m=0.6 * nav.lookahead_m,
+                    max_lookahead_m=1.6 * nav.lookahead_m,
+                    max_yaw_rate_rps=min(nav.max_yaw_rate_rps, a.kind.max_yaw_rate_rps),
+                    goal_tolerance_m=nav.goal_tolerance_m,
+                )
+                self.navigators[a.namespace] = Navigator(a.namespace, a.goals, planner, pursuit, loop=a.loop)
+            elif a.kind.drive == "walker":
+                self.walkers[a.namespace] = WaypointFollower(
+                    a.goals,
+                    FollowerParams(speed_mps=a.speed_mps, max_yaw_rate_rps=2.5, turn_in_place_rad=1.2),
+                    loop=a.loop,
+                )
+
+    # ------------------------------------------------------------------------------- cameras
+    def camera_frame(
+        self, t_ns: int, camera_id: str, *, jpeg: bytes | None = None, gray: NDArray[np.uint8] | None = None
+    ) -> str | None:
+        """Let the localizer search one image; returns "full"/"roi" if it did, None if it skipped."""
+        if self.source != "camera":
+            return None
+        plan = self.localizer.search_plan(t_ns, camera_id)
+        if not plan:
+            return None
+        self.localizer.process_image(t_ns, camera_id, jpeg=jpeg, gray=gray)
+        return "full" if plan == "full" else "roi"
+
+    def close_camera_tick(self, t_ns: int) -> None:
+        if self.source == "camera":
+            self.localizer.close_frame(t_ns)
+
+    # ------------------------------------------------------------------------------- control
+    def control(self, t_ns: int, dt_s: float, truth: dict[str, tuple[float, float, float]]) -> ControlOutput:
+        """Commands for every agent. ``truth`` is used only for people and ``source=ground_truth``."""
+        out = ControlOutput()
+        if self.source == "camera":
+            out.estimates = self.localizer.estimate(t_ns)
+            poses = {ns: (e.x_m, e.y_m, e.yaw_rad) for ns, e in out.estimates.items() if e.valid}
+        else:
+            poses = {ns: truth[ns] for ns in self.navigators}
+        self.last_known.update(poses)
+        intents = []
+        for ns, nav in self.navigators.items():
+            if ns in poses:
+                intent = nav.intent(poses[ns], self.agents[ns].number, self.agents[ns].kind.footprint_m)
+            else:  # not localized: it stands still where it was last known, others keep clear
+                intent = Intent(
+                    ns,
+                    self.agents[ns].number,
+                    self.last_known[ns],
+                    self.agents[ns].kind.footprint_m,
+                    None,
+                    yields=False,
+                )
+            if intent is not None:
+                intents.append(intent)
+        for ns in self.walkers:
+            intents.append(Intent(ns, 10**6, truth[ns], self.agents[ns].kind.footprint_m, None, yields=False))
+        if self.nav.coordination:
+            out.decisions = self.coordinator.decide(t_ns, intents)
+        for ns, nav in self.navigators.items():
+            decision = out.decisions.get(ns)
+            blocked = None
+            if decision is not None and decision.replan:
+                blocked = self._others_mask(ns, [i for i in intents if i.namespace != ns])
+            out.commands[ns] = nav.step(poses.get(ns), dt_s, decision, blocked=blocked)
+        for ns, walker in self.walkers.items():
+            x, y, yaw = truth[ns]
+            cmd = walker.step(x, y, yaw, dt_s)
+            out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
+        return out
+
+    def _others_mask(self, ns: str, others: list[Intent]) -> NDArray[np.bool_]:
+        """Grid cells a detour of ``ns`` must avoid: where the others stand and where they will drive.
+
+        Grown by the robot's half width plus the coordinator's safety distance, so that a detour
+        the planner finds is one the coordinator lets it drive.
+        """
+        mask = np.zeros(self.grid.shape, dtype=np.uint8)
+        grow = self.agents[ns].kind.half_width_m + self.nav.safety_distance_m
+        x0, y0 = self.grid.origin_xy_m
+        for other in others:
+            shape = swept_claim(other, horizon_m=self.coordinator.horizon_m, grow_m=grow)
+            polys = getattr(shape, "geoms", [shape])
+            for poly in polys:
+                pts = np.asarray(poly.exterior.coords)[:, :2]
+                px = np.stack(
+                    [(pts[:, 0] - x0) / self.grid.resolution_m, (pts[:, 1] - y0) / self.grid.resolution_m],
+                    axis=1,
+                )
+                cv2.fillPoly(mask, [np.round(px).astype(np.int32)], 1)
+        return mask.astype(bool)

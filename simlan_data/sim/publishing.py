@@ -1,0 +1,190 @@
+"""Turn the run's state into recorded messages (topics from recording/schema.py)."""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+from .. import __version__
+from ..config import Config
+from ..constants import FORMAT_VERSION
+from ..geometry.camera import CameraModel
+from ..geometry.transforms import Transform
+from ..gpss.localization import PoseEstimate
+from ..gpss.markers import Detection
+from ..gpss.navigation import Navigator
+from ..recording import messages as M
+from ..recording import schema
+from ..recording.writer import RecordingWriter
+from ..world.labels import SEMANTIC_CLASSES
+from .agents import Agent, CollisionReading
+
+DEPENDENCIES = (
+    "pybullet",
+    "rosbags",
+    "mcap",
+    "opencv-python-headless",
+    "numpy",
+    "scipy",
+    "polars",
+    "hydra-core",
+    "omegaconf",
+    "shapely",
+)
+
+
+def dependency_versions() -> dict[str, str]:
+    out = {}
+    for name in DEPENDENCIES:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def global_topic(name: str) -> schema.Topic:
+    for t in schema.GLOBAL_TOPICS:
+        if t.name == name:
+            return t
+    raise KeyError(name)
+
+
+def camera_tf(camera: CameraModel) -> Any:
+    """The static transform message map -> camera optical frame."""
+    return M.transform_stamped(0, schema.MAP_FRAME, camera.frame_id, camera.world_from_camera)
+
+
+class Publisher:
+    """Writes everything a run publishes besides camera images (see camera_recording.py)."""
+
+    def __init__(self, writer: RecordingWriter, cfg: Config, agents: list[Agent]) -> None:
+        self.writer, self.cfg = writer, cfg
+        self.agents = agents
+        self.topics = {a.namespace: schema.agent_topics(a.namespace) for a in agents}
+        self.odom: dict[str, Transform] = {}
+        self._goal_index: dict[str, int] = {}
+        self._status: dict[str, tuple] = {}
+
+    def static(self, *, config_yaml: str, renderer: str, cameras: list[CameraModel]) -> None:
+        cfg, w = self.cfg, self.writer
+        w.write(global_topic(schema.CONFIG), 0, M.string(config_yaml))
+        renderer_info = f"{'layered' if cfg.render.layered else 'full'}; distortion {'on' if cfg.cameras.distortion else 'off'}; near {cfg.cameras.near_m} m"
+        w.write(
+            global_topic(schema.RUN_INFO),
+            0,
+            M.run_info(
+                format_version=FORMAT_VERSION,
+                version=__version__,
+                scenario=cfg.scenario.name,
+                seed=cfg.seed,
+                renderer=renderer,
+                renderer_info=renderer_info,
+                dependencies=dependency_versions(),
+            ),
+        )
+        w.write(global_topic(schema.SEMANTIC_LABELS), 0, M.semantic_labels(dict(SEMANTIC_CLASSES)))
+        static = [camera_tf(c) for c in cameras]
+        for agent in self.agents:
+            pose = agent.pose()
+            self.odom[agent.namespace] = Transform.from_pose2d(
+                float(pose.translation[0]), float(pose.translation[1]), pose.yaw()
+            )
+            static.append(
+                M.transform_stamped(
+                    0, schema.MAP_FRAME, schema.odom_frame(agent.namespace), self.odom[agent.namespace]
+                )
+            )
+        w.write(global_topic(schema.TF_STATIC), 0, M.tf_message(static))
+
+    def ground_truth(self, t: int) -> None:
+        self.writer.write(global_topic(schema.CLOCK), t, M.clock(t))
+        poses = [
+            M.transform_stamped(t, schema.MAP_FRAME, schema.base_link_frame(a.namespace), a.pose())
+            for a in self.agents
+        ]
+        self.writer.write(global_topic(schema.GROUND_TRUTH_POSES), t, M.tf_message(poses))
+
+    def detections(self, t: int, camera: CameraModel, detections: list[Detection], mode: str) -> None:
+        topic = schema.camera_topics(camera.camera_id, rgb="jpeg", depth=None, semantic=None)["detections"]
+        corners = [d.corners_px for d in detections]
+        self.writer.write(
+            topic,
+            t,
+            M.marker_detections(t, camera.frame_id, [d.marker_id for d in detections], corners, mode),
+        )
+
+    def command(self, t: int, ns: str, v: float, w: float, collision: CollisionReading) -> None:
+        topics, frame = self.topics[ns], schema.base_link_frame(ns)
+        self.writer.write(topics["cmd_vel"], t, M.twist_stamped(t, frame, v, w))
+        self.writer.write(
+            topics["collision"],
+            t,
+            M.collision_state(
+                t,
+                frame,
+                in_collision=collision.in_collision,
+                max_force_n=collision.max_force_n,
+                total_force_n=collision.total_force_n,
+                others=collision.others,
+            ),
+        )
+
+    def estimates(self, t: int, estimates: dict[str, PoseEstimate], tracked: list[str]) -> None:
+        tfs = []
+        for ns in tracked:
+            e = estimates.get(ns)
+            self.writer.write(
+                self.topics[ns]["localization"],
+                t,
+                M.localization_status(
+                    t,
+                    observed=e is not None and e.observed,
+                    valid=e is not None and e.valid,
+                    fix_age_s=e.age_s if e is not None else -1.0,
+                    cameras=e.cameras if e is not None else (),
+                ),
+            )
+            if e is None or not e.valid:
+                continue
+            self.writer.write(
+                self.topics[ns]["pose_estimate"],
+                t,
+                M.pose_with_covariance(t, schema.MAP_FRAME, e.x_m, e.y_m, e.yaw_rad, e.covariance),
+            )
+            odom_from_base = self.odom[ns].inverse() @ Transform.from_pose2d(e.x_m, e.y_m, e.yaw_rad)
+            tfs.append(
+                M.transform_stamped(t, schema.odom_frame(ns), schema.base_link_frame(ns), odom_from_base)
+            )
+        if tfs:
+            self.writer.write(global_topic(schema.TF), t, M.tf_message(tfs))
+
+    def navigation(self, t: int, ns: str, nav: Navigator, blocked_by: tuple[str, ...]) -> None:
+        topics = self.topics[ns]
+        if nav.new_plan and nav.plan is not None:
+            self.writer.write(topics["plan"], t, M.path(t, schema.MAP_FRAME, nav.plan.points_xy.tolist()))
+            nav.new_plan = False
+        goal = nav.goal
+        if goal is not None and self._goal_index.get(ns) != nav.index:
+            self._goal_index[ns] = nav.index
+            self.writer.write(
+                topics["goal"], t, M.pose_stamped(t, schema.MAP_FRAME, float(goal[0]), float(goal[1]), 0.0)
+            )
+        s = nav.status
+        key = (s.state, nav.index, s.goals_reached, s.goals_failed, blocked_by)
+        if self._status.get(ns) != key:
+            self._status[ns] = key
+            self.writer.write(
+                topics["navigation"],
+                t,
+                M.navigation_status(
+                    t,
+                    state=s.state,
+                    goal_index=nav.index,
+                    goals_total=s.goals_total,
+                    goals_reached=s.goals_reached,
+                    goals_failed=s.goals_failed,
+                    planned_length_m=s.planned_length_m,
+                    blocked_by=blocked_by,
+                ),
+            )
