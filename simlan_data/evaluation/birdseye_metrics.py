@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from skimage.metrics import structural_similarity
 
 from ..geometry.camera import CameraModel
-from ..gpss.birdseye import CanvasSpec, camera_footprint
+from ..gpss.birdseye import BirdseyeStitcher, CanvasSpec, camera_footprint
 from ..world.labels import SEMANTIC_CLASSES
 from ..world.layout import Placement
 from ..world.models import BUILDING_X_M, BUILDING_Y_M, SLAB_M, model_spec
@@ -287,3 +287,113 @@ def distortion_displacement_cm(
         # rays through pixels without a valid ray (beyond the lens model) show nothing: count as far off
         out.append(np.where(ok, d, np.inf))
     return np.concatenate(out) if out else np.zeros(0)
+
+
+Window = tuple[slice, slice]
+FULL = (slice(None), slice(None))
+
+
+def stitcher_projections(
+    stitcher: BirdseyeStitcher, frames: Sequence[NDArray[np.uint8]], *, nearest: bool = False
+) -> list[tuple[Window, NDArray[np.uint8], NDArray[np.bool_]]]:
+    """Every camera's own projection with its window and coverage (for masks and seam error)."""
+    interp = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR
+    return [
+        ((fp.rows, fp.cols), img, fp.valid)
+        for fp, img in filter(None, stitcher.project_each(frames, interpolation=interp))
+    ]
+
+
+@dataclass
+class MethodScores:
+    """Per-frame measures of one method, pooled over frames."""
+
+    psnr_rgb: list[float]
+    psnr_grey: list[float]
+    ssim: list[float]
+    seam_rms: list[float]
+    gcp_offsets_px: list[NDArray[np.float64]]
+    coverage: float = float("nan")
+
+
+class QualityEvaluator:
+    """Score canvases of several methods against one ground truth, frame after frame."""
+
+    def __init__(
+        self,
+        spec: CanvasSpec,
+        truth_rgb: NDArray[np.uint8],
+        truth_labels: NDArray[np.uint8],
+        gcp_world: NDArray[np.float64],
+    ) -> None:
+        self.spec, self.truth_rgb, self.truth_labels = spec, truth_rgb, truth_labels
+        self.truth_grey = grey(truth_rgb)
+        self.gcp_world = gcp_world
+        self.gcp_px = (
+            np.stack(spec.world_to_pixel(gcp_world[:, 0], gcp_world[:, 1]), axis=1)
+            if len(gcp_world)
+            else np.zeros((0, 2))
+        )
+        self.search_px = round(GCP_SEARCH_M * spec.px_per_m)
+        self.methods: dict[str, MethodScores] = {}
+        self.floor_fraction: list[float] = []
+        self.gcp_usable: list[int] = []
+        self._mask: NDArray[np.bool_] | None = None
+        self._usable: NDArray[np.bool_] = np.zeros(0, dtype=bool)
+
+    def begin_frame(
+        self, camera_labels: Sequence[tuple[Window, NDArray[np.uint8], NDArray[np.bool_]]]
+    ) -> None:
+        """Set the floor masks of a frame from the cameras' projected labels (method-independent)."""
+        every, seen = floor_views(self.truth_labels, camera_labels)
+        self._mask = every
+        self._usable = usable_gcps(self.gcp_px, self.truth_grey, self.truth_labels, seen)
+        self.floor_fraction.append(float(every.mean()))
+        self.gcp_usable.append(int(self._usable.sum()))
+
+    def add(
+        self,
+        method: str,
+        canvas: NDArray[np.uint8],
+        coverage: NDArray[np.bool_],
+        projections: Sequence[tuple[Window, NDArray[np.uint8], NDArray[np.bool_]]],
+    ) -> None:
+        """Score one method's canvas of the current frame."""
+        if self._mask is None:
+            raise RuntimeError("begin_frame() first")
+        mask = self._mask
+        s = self.methods.setdefault(method, MethodScores([], [], [], [], []))
+        s.coverage = float(coverage.mean())
+        g = grey(canvas)
+        s.psnr_rgb.append(psnr(canvas, self.truth_rgb, mask) if canvas.ndim == 3 else float("nan"))
+        s.psnr_grey.append(psnr(g, self.truth_grey, mask))
+        s.ssim.append(ssim(g, self.truth_grey, mask))
+        s.seam_rms.append(seam_rms(projections, mask))
+        found = locate_gcps(g, self.truth_grey, self.gcp_px[self._usable], search_px=self.search_px)
+        s.gcp_offsets_px.append(found.offsets_px)
+
+    def summary(self) -> dict[str, dict[str, float]]:
+        """Per method: mean PSNR/SSIM/seam over frames, GCP error pooled over frames."""
+        out: dict[str, dict[str, float]] = {}
+        cm_per_px = 100.0 * self.spec.m_per_px
+        for name, s in self.methods.items():
+            offsets = np.vstack(s.gcp_offsets_px) if s.gcp_offsets_px else np.zeros((0, 2))
+            err = np.hypot(offsets[:, 0], offsets[:, 1])
+            found = np.isfinite(err)
+            # points not found within the search radius count as at least that far off
+            pooled = np.where(found, err, np.inf)
+            out[name] = {
+                "psnr_db": float(np.nanmean(s.psnr_rgb)) if np.isfinite(s.psnr_rgb).any() else float("nan"),
+                "psnr_grey_db": float(np.nanmean(s.psnr_grey)),
+                "ssim": float(np.nanmean(s.ssim)),
+                "seam_rms": float(np.nanmean(s.seam_rms)),
+                "coverage": s.coverage,
+                "gcp_count": float(len(err)),
+                "gcp_found": float(found.sum()),
+                "gcp_median_px": float(np.median(pooled)) if len(err) else float("nan"),
+                "gcp_median_cm": float(np.median(pooled)) * cm_per_px if len(err) else float("nan"),
+                "gcp_p90_cm": float(np.percentile(pooled, 90, method="higher")) * cm_per_px
+                if len(err)
+                else float("nan"),
+            }
+        return out

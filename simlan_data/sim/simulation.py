@@ -6,6 +6,7 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
       control tick   agents: ground-truth pose -> follower -> cmd_vel -> wheel motors; collisions
       truth tick     /clock, /ground_truth/poses
       camera tick    movable AABBs -> layered render per camera -> encode (worker threads) -> bag
+                     (every n-th: all frames -> bird's-eye stitcher -> JPEG -> /birdseye/image)
       physics step
 """
 
@@ -27,6 +28,7 @@ from ..recording import messages as M
 from ..recording import schema
 from ..recording.writer import NullWriter, RecordingWriter
 from ..world.labels import SEMANTIC_CLASSES
+from .birdseye_live import BirdseyeRecorder
 from .camera_recording import CameraRecorder
 from .scene import Inputs, Scene
 
@@ -172,6 +174,7 @@ class Simulation:
             depth_every=self.depth_every,
             semantic_every=self.semantic_every,
         )
+        birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
         ignore = scene.world.floor
         dt_control = self.control_every / self.physics_hz
         cid = scene.client.id
@@ -215,11 +218,15 @@ class Simulation:
                 render0 = time.perf_counter()
                 scene.refresh_static_layers()
                 aabbs = scene.agent_aabbs()
+                frames = []
                 for renderer in scene.renderers:
                     images = renderer.render(aabbs)
                     stats.camera_frames += 1
                     stats.camera_frames_changed += int(images.changed)
                     recorder.record(t, step // self.camera_every, renderer.camera, images)
+                    frames.append(images)
+                if birdseye is not None:
+                    birdseye.tick(t, step // self.camera_every, frames)
                 stats.render_wall_s += time.perf_counter() - render0
                 if progress is not None:
                     progress(t / NS_PER_S)
