@@ -273,7 +273,7 @@ class BirdseyeConfig:
 
     def canvas(self, where: str = "config") -> CanvasSpec:
         """The canvas; raises ConfigError naming the field if it is unusable."""
-        return CanvasSpec(tuple(self.x_m), tuple(self.y_m), self.px_per_m, self.plane_z_m, where=where)  # type: ignore[arg-type]
+        return CanvasSpec(self.x_m, self.y_m, self.px_per_m, self.plane_z_m, where=where)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         if _incomplete(self):

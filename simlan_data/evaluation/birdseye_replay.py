@@ -93,13 +93,13 @@ def _ground_truth(ctx: ReplayContext, spec: CanvasSpec) -> tuple[NDArray[np.uint
     world_dict = ctx.config.get("world")
     try:
         world_cfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(WorldConfig), world_dict or {}))
-    except SimlanError:
-        raise
-    except Exception as err:
+    except Exception as err:  # ConfigError from the schema's checks, OmegaConf's type errors
         raise RecordingInputError(
             "recorded world config unusable",
             str(ctx.reader.path),
-            f"{type(err).__name__}: {str(err).splitlines()[0]}",
+            err.line()
+            if isinstance(err, SimlanError)
+            else f"{type(err).__name__}: {str(err).splitlines()[0]}",
             "replay with --set ground_truth=false",
         ) from err
     assert isinstance(world_cfg, WorldConfig)

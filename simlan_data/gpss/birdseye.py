@@ -63,9 +63,18 @@ class CanvasSpec:
     where: str = "config"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "x_m", tuple(float(v) for v in self.x_m))
-        object.__setattr__(self, "y_m", tuple(float(v) for v in self.y_m))
         p = self.prefix
+        for name in ("x_m", "y_m"):
+            value = getattr(self, name)
+            try:
+                object.__setattr__(self, name, tuple(float(v) for v in value))
+            except (TypeError, ValueError):
+                self._bad(name, value, "expected [min, max] in metres", f"use e.g. {p}.{name}=[-10,10]")
+        for name in ("px_per_m", "plane_z_m"):
+            try:
+                object.__setattr__(self, name, float(getattr(self, name)))
+            except (TypeError, ValueError):
+                self._bad(name, getattr(self, name), "expected a number", f"use e.g. {p}.{name}=50")
         for name, rng in (("x_m", self.x_m), ("y_m", self.y_m)):
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng):
                 self._bad(name, list(rng), "expected [min, max] in metres", f"use e.g. {p}.{name}=[-10,10]")
@@ -327,6 +336,10 @@ class BirdseyeStitcher:
             b[better] = eff[better]
             p[better] = k
         self.coverage = self.camera_count > 0
+        self.density = np.zeros((H, W), dtype=np.float32)  # of the sharpest camera at each pixel
+        for fp in self.footprints:
+            if fp is not None:
+                np.maximum(self.density[fp.rows, fp.cols], fp.density, out=self.density[fp.rows, fp.cols])
         slot_w = np.zeros((H, W, K), dtype=np.float32)
         slot_c = np.full((H, W, K), -1, dtype=np.int16)
         for k, fp in enumerate(self.footprints):
