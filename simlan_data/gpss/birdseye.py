@@ -17,7 +17,7 @@ Per frame::
 
     frames --copy--> atlas (one image holding every camera)
         --cv2.remap (fixed-point maps, one call)--> canvas from each pixel's primary camera
-        --cv2.remap over the seam pixels only (2-4 cameras each)--> integer blend --> canvas
+        --cv2.remap of the other 1-3 cameras at the seam pixels only--> integer blend --> canvas
 
 Only cameras whose lookup table is valid at a pixel are blended there; pixels no camera sees stay
 black. The class is pure numpy + OpenCV: it never imports the simulator or a file format.
@@ -277,10 +277,11 @@ class SeamPixels:
     """Canvas pixels blended from several cameras: flat indices, per-slot maps and weights."""
 
     index: NDArray[np.intp]  # (N,) flat canvas indices
-    cameras: NDArray[np.int16]  # (n, N) camera index per slot, strongest first
+    padded: NDArray[np.intp]  # (R * SEAM_ROW,) the same, padded to whole rows
+    cameras: NDArray[np.int16]  # (n, N) camera index per slot, strongest (the primary) first
     weights: NDArray[np.uint16]  # (n, R, SEAM_ROW, 1) integer weights, summing to WEIGHT_ONE
-    map1: NDArray[np.int16]  # (n * R, SEAM_ROW, 2) fixed-point atlas maps (cv2.convertMaps)
-    map2: NDArray[np.uint16]  # (n * R, SEAM_ROW); pixel lists padded to whole rows
+    map1: NDArray[np.int16]  # ((n - 1) * R, SEAM_ROW, 2) fixed-point atlas maps of slots 1..n-1
+    map2: NDArray[np.uint16]  # ((n - 1) * R, SEAM_ROW)
 
 
 class BirdseyeStitcher:
@@ -382,13 +383,14 @@ class BirdseyeStitcher:
         self._primary_float = (map_x, map_y)
         # seam pixels: two or more cameras with a weight, grouped by how many (no wasted slots)
         n_cams = (q > 0).sum(axis=2).ravel()
-        flat_q, flat_c = q.reshape(-1, K), slot_c.reshape(-1, K)
+        flat_q, flat_c, flat_w = q.reshape(-1, K), slot_c.reshape(-1, K), slot_w.reshape(-1, K)
         self.seams = []
         for n in range(2, K + 1):
             index = np.nonzero(n_cams == n)[0]
             if index.size == 0:
                 continue
-            order = np.argsort(-flat_q[index], axis=1, kind="stable")[:, :n]
+            # strongest first, as argmax chose the primary: slot 0 is what the canvas already shows
+            order = np.argsort(-flat_w[index], axis=1, kind="stable")[:, :n]
             qs = np.take_along_axis(flat_q[index], order, axis=1).T.astype(np.uint16)  # (n, N)
             cs = np.take_along_axis(flat_c[index], order, axis=1).T  # (n, N)
             self.seams.append(self._seam_group(index, cs, qs))
@@ -408,15 +410,17 @@ class BirdseyeStitcher:
                 lr, lc = rows[sel] - fp.rows.start, cols[sel] - fp.cols.start
                 sx[slot, sel] = fp.map_x[lr, lc] + du
                 sy[slot, sel] = fp.map_y[lr, lc] + dv
-        # remap's images are limited to 32767 columns: fold each pixel list into rows
+        # remap's images are limited to 32767 columns: fold each pixel list into rows. Slot 0 is
+        # the primary camera, already remapped into the canvas: only the others are sampled again
         pad = (-index.size) % SEAM_ROW
 
         def fold(a: NDArray, value: float) -> NDArray:
             return np.pad(a, ((0, 0), (0, pad)), constant_values=value).reshape(-1, SEAM_ROW)
 
-        m1, m2 = cv2.convertMaps(fold(sx, OUTSIDE), fold(sy, OUTSIDE), cv2.CV_16SC2)
+        m1, m2 = cv2.convertMaps(fold(sx[1:], OUTSIDE), fold(sy[1:], OUTSIDE), cv2.CV_16SC2)
         w = fold(weights, 0).reshape(cams.shape[0], -1, SEAM_ROW, 1).astype(np.uint16)
-        return SeamPixels(index, cams, w, m1, m2)
+        padded = np.pad(index, (0, pad), mode="edge")
+        return SeamPixels(index, padded, cams, w, m1, m2)
 
     # ------------------------------------------------------------------------------ per frame
     def _fill_atlas(self, frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
@@ -445,9 +449,11 @@ class BirdseyeStitcher:
         canvas = cv2.remap(atlas, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         flat = canvas.reshape(-1).view(_RGB)
         for s in self.seams:
-            samples = cv2.remap(atlas, s.map1, s.map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            samples = samples.reshape(s.weights.shape[0], -1, SEAM_ROW, 3)
-            acc = (samples * s.weights).sum(axis=0, dtype=np.uint16)  # < 256 * 255 + 128
+            others = cv2.remap(atlas, s.map1, s.map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            others = others.reshape(s.weights.shape[0] - 1, -1, SEAM_ROW, 3)
+            primary = flat[s.padded].view(np.uint8).reshape(others.shape[1:])
+            acc = primary * s.weights[0]  # uint16: the weighted sum stays < 256 * 255 + 128
+            acc += (others * s.weights[1:]).sum(axis=0, dtype=np.uint16)
             acc += WEIGHT_ONE // 2
             blended = (acc >> 8).astype(np.uint8).reshape(-1).view(_RGB)
             np.put(flat, s.index, blended[: s.index.size])

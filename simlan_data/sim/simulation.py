@@ -111,6 +111,7 @@ class Simulation:
         self.depth_every = round(cfg.cameras.rate_hz / cfg.recording.depth_rate_hz)
         self.semantic_every = round(cfg.cameras.rate_hz / cfg.recording.semantic_rate_hz)
         self.steps = round(cfg.duration_s * hz)
+        self.birdseye: BirdseyeRecorder | None = None
 
     def stamp_ns(self, step: int) -> int:
         return step * NS_PER_S // self.physics_hz
@@ -139,6 +140,8 @@ class Simulation:
                 writer.set_metadata("simlan.seed", str(cfg.seed))
                 writer.set_metadata("simlan.scenario", cfg.scenario.name)
                 writer.set_metadata("simlan.renderer", scene.client.backend)
+                # set up before the clock starts, like the scene (lookup tables take a second or two)
+                self.birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
                 wall0 = time.perf_counter()
                 self._loop(scene, writer, stats, progress)
                 stats.wall_s = time.perf_counter() - wall0
@@ -174,7 +177,7 @@ class Simulation:
             depth_every=self.depth_every,
             semantic_every=self.semantic_every,
         )
-        birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
+        birdseye = self.birdseye
         ignore = scene.world.floor
         dt_control = self.control_every / self.physics_hz
         cid = scene.client.id
