@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
@@ -125,7 +126,8 @@ def main() -> None:
     parser.add_argument("--live-repeat", type=int, default=2, help="runs per live rate (fastest counts)")
     parser.add_argument("--json", type=Path, help="also write raw numbers here")
     args = parser.parse_args()
-    print(f"Machine: {machine()}; cv2 threads {cv2.getNumThreads()}\n")
+    load0 = os.getloadavg()[0]
+    print(f"Machine: {machine()}; cv2 threads {cv2.getNumThreads()}; load average at start {load0:.1f}\n")
     raw: dict = {}
 
     t0 = time.perf_counter()
@@ -282,6 +284,10 @@ def main() -> None:
             f"(encoder thread), {speed['jpeg_kib']:.0f} KiB.\n"
         )
         print(table(["birdseye.rate_hz", "loop wall s", "real-time factor", "vs off", "recording MiB"], rows))
+    raw["load_average"] = [load0, os.getloadavg()[0]]
+    print(
+        f"\nLoad average (1 min) at start {load0:.1f}, at end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores."
+    )
     print("\nRaw:\n```\n" + json.dumps(raw, indent=1, sort_keys=True, default=float) + "\n```")
     if args.json:
         args.json.write_text(json.dumps(raw, indent=2, sort_keys=True, default=float))

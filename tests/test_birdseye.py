@@ -182,3 +182,19 @@ def test_bad_canvas_in_a_run_gives_one_line_and_exit_2(tmp_path) -> None:
         "give birdseye.x_m=[min,max] with min < max"
     ]
     assert not (tmp_path / "run" / "recording").exists()
+
+
+def test_marker_plane_lookup_table() -> None:
+    """On the plane z = 1.3 m (the robots' markers) the table maps points of that plane."""
+    cam = _camera(163)
+    spec = CanvasSpec((2.0, 12.0), (-4.0, 6.0), 20.0, plane_z_m=1.3)
+    fp = camera_footprint(cam, spec)
+    assert fp is not None
+    rows, cols = np.nonzero(fp.valid)
+    x, y = spec.pixel_to_world(cols + fp.cols.start, rows + fp.rows.start)
+    uv, ok = cam.project(np.stack([x, y, np.full_like(x, 1.3)], 1))
+    assert ok.all()
+    assert np.abs(np.stack([fp.map_x[rows, cols], fp.map_y[rows, cols]], 1) - uv).max() < 2e-3
+    # a camera 7.3 m up sees less of a plane 1.3 m closer to it
+    floor = camera_footprint(cam, CanvasSpec((2.0, 12.0), (-4.0, 6.0), 20.0))
+    assert floor is not None and fp.valid.sum() < floor.valid.sum()

@@ -250,6 +250,8 @@ def write_report(
     if last is not None:
         cv2.imwrite(str(out_dir / LAST_PNG), cv2.cvtColor(last, cv2.COLOR_RGB2BGR))
         lines += [f"Last canvas at full resolution: `{LAST_PNG}`.", ""]
+    if not summary and spec.plane_z_m != 0.0:
+        lines += ["Quality is scored on the floor only (plane_z_m = 0); this canvas lies above it.", ""]
     if summary:
         o, s = summary["ours"], summary["simlan"]
         lines += [

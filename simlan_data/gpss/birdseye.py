@@ -316,6 +316,14 @@ class BirdseyeStitcher:
         return (k % self.columns) * self.tile_w, (k // self.columns) * self.tile_h
 
     def _build(self) -> None:
+        """Primary camera, blend weights and remap tables of every canvas pixel.
+
+        Per camera c: edge_c = smoothstep(distance to its footprint border / band), so a camera
+        fades out before its image ends. Primary = argmax density_c * edge_c. Weight of c =
+        ramp_c * edge_c, where ramp_c is 1 in c's primary region and falls to 0 at ``band`` px
+        outside it: two cameras share a seam over 2 * band, symmetric about the region border.
+        At most MAX_SEAM_CAMERAS cameras per pixel (the strongest), integer weights.
+        """
         H, W = self.spec.height, self.spec.width
         K = MAX_SEAM_CAMERAS
         band = self.band_px
