@@ -49,8 +49,10 @@ _TOPIC = re.compile(r"^/camera_([^/]+)/(image_raw|semantic/image_raw)(/compresse
 
 def _decode(m: Message) -> NDArray[np.uint8]:
     if m.msgtype.endswith("CompressedImage"):
-        return decode_compressed(m.msg.format, m.msg.data)
-    return decode_raw(m.msg.encoding, m.msg.height, m.msg.width, m.msg.step, m.msg.data)
+        image = decode_compressed(m.msg.format, m.msg.data)
+    else:
+        image = decode_raw(m.msg.encoding, m.msg.height, m.msg.width, m.msg.step, m.msg.data)
+    return np.asarray(image, dtype=np.uint8)
 
 
 def birdseye_settings(ctx: ReplayContext) -> tuple[BirdseyeConfig, int, bool]:
@@ -125,9 +127,9 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
     colour: dict[str, str] = {}
     semantic: dict[str, str] = {}
     for topic in ctx.reader.topics:
-        m = _TOPIC.match(topic)
-        if m and m.group(1) in cams:
-            (colour if m.group(2) == "image_raw" else semantic)[topic] = m.group(1)
+        found = _TOPIC.match(topic)
+        if found and found.group(1) in cams:
+            (colour if found.group(2) == "image_raw" else semantic)[topic] = found.group(1)
     ids = [c for c in cams if c in colour.values()]
     cameras = [cams[c] for c in ids]
     stitcher = BirdseyeStitcher(cameras, spec, feather_m=cfg.feather_m)
@@ -141,15 +143,15 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
     stitch_s, n_canvases, last = 0.0, 0, None
     evaluated: list[tuple[list[NDArray[np.uint8]], list[NDArray[np.uint8]], NDArray[np.uint8]]] = []
     labelled_seen = 0
-    group: dict[str, Any] = {}
-    stamp = None
+    group: dict[tuple[str, str], Message] = {}
+    stamp: int | None = None
 
     def flush() -> None:
         nonlocal stitch_s, n_canvases, last, labelled_seen
         rgb = [group.get(("rgb", c)) for c in ids]
         if any(f is None for f in rgb):
             return
-        frames = [_decode(f) for f in rgb]
+        frames = [_decode(f) for f in rgb if f is not None]
         t0 = time.perf_counter()
         last = stitcher.stitch(frames)
         stitch_s += time.perf_counter() - t0
@@ -157,15 +159,15 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
         labels = [group.get(("sem", c)) for c in ids]
         if all(lab is not None for lab in labels):
             if labelled_seen in wanted:
-                evaluated.append((frames, [_decode(lab) for lab in labels], last))
+                evaluated.append((frames, [_decode(lab) for lab in labels if lab is not None], last))
             labelled_seen += 1
 
-    for m in ctx.reader.messages([*colour, *semantic]):
-        if m.stamp_ns != stamp:
+    for msg in ctx.reader.messages([*colour, *semantic]):
+        if msg.stamp_ns != stamp:
             flush()
-            group, stamp = {}, m.stamp_ns
-        key = ("rgb", colour[m.topic]) if m.topic in colour else ("sem", semantic[m.topic])
-        group[key] = m
+            group, stamp = {}, msg.stamp_ns
+        slot = ("rgb", colour[msg.topic]) if msg.topic in colour else ("sem", semantic[msg.topic])
+        group[slot] = msg
     flush()
 
     metrics: dict[str, float] = {
