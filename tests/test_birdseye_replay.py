@@ -108,6 +108,7 @@ def test_replay_option_errors(birdseye_run: Path) -> None:
     with RecordingReader(birdseye_run) as reader:
         for options, match in [
             ({"eval_frames": -1}, r"invalid eval_frames=-1 in replay --set"),
+            ({"colour": False}, r"unknown birdseye option 'colour' in replay --set: known: x_m, y_m"),
             ({"x_m": "abc"}, r"invalid birdseye.x_m='abc' in replay --set: expected \[min, max\]"),
             ({"px_per_m": [1, 2]}, r"invalid birdseye.px_per_m=\[1, 2\] in replay --set: expected a number"),
             ({"feather_m": 0}, r"invalid birdseye.feather_m=0"),
