@@ -258,10 +258,13 @@ def camera_footprint(
     good &= ok4[iv, iu]
     if not good.any():
         return None
-    gx_u, gy_u = np.gradient(map_x.astype(np.float64), axis=1), np.gradient(map_x.astype(np.float64), axis=0)
-    gx_v, gy_v = np.gradient(map_y.astype(np.float64), axis=1), np.gradient(map_y.astype(np.float64), axis=0)
-    density = np.abs(gx_u * gy_v - gy_u * gx_v).astype(np.float32)
-    density[~good] = 0.0
+    mx, my = map_x.astype(np.float64), map_y.astype(np.float64)
+    gx_u, gy_u = np.gradient(mx, axis=1), np.gradient(mx, axis=0)
+    gx_v, gy_v = np.gradient(my, axis=1), np.gradient(my, axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        det = np.abs(gx_u * gy_v - gy_u * gx_v)
+    # rays near the horizon project far away: their (invalid) neighbours must not overflow float32
+    density = np.where(good, np.minimum(np.nan_to_num(det, nan=0.0, posinf=1e6), 1e6), 0.0).astype(np.float32)
     map_x[~good] = OUTSIDE
     map_y[~good] = OUTSIDE
     return Footprint(camera.camera_id, rows, cols, map_x, map_y, good, density)
