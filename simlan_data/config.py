@@ -15,6 +15,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from .errors import ConfigError
+from .gpss.birdseye import CanvasSpec
 
 NAMESPACE_RE = re.compile(r"^robot_agent_(\d+)$")
 STREAMS = ("rgb", "depth", "semantic")
@@ -259,6 +260,39 @@ class RecordingConfig:
 
 
 @dataclass
+class BirdseyeConfig:
+    """The live bird's-eye view (``/birdseye/image``) and the canvas replays use by default."""
+
+    rate_hz: float = 0.0  # 0: no live topic
+    x_m: list[float] = field(default_factory=lambda: [-8.0, 34.0])
+    y_m: list[float] = field(default_factory=lambda: [-10.0, 10.0])
+    px_per_m: float = 50.0
+    plane_z_m: float = 0.0
+    feather_m: float = 0.2
+    jpeg_quality: int = 85
+
+    def canvas(self, where: str = "config") -> CanvasSpec:
+        """The canvas; raises ConfigError naming the field if it is unusable."""
+        return CanvasSpec(self.x_m, self.y_m, self.px_per_m, self.plane_z_m, where=where)  # type: ignore[arg-type]
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if not 0 <= self.rate_hz <= 100:
+            raise _bad(
+                "birdseye.rate_hz",
+                self.rate_hz,
+                "must be within 0..100 Hz (0: off)",
+                "use e.g. birdseye.rate_hz=1",
+            )
+        if not 0 < self.feather_m <= 5:
+            raise _bad("birdseye.feather_m", self.feather_m, "must be within (0, 5] m", "use 0.2")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise _bad("birdseye.jpeg_quality", self.jpeg_quality, "must be within 1..100", "use 85")
+        self.canvas()
+
+
+@dataclass
 class AgentConfig:
     """One agent (SIMLAN's ROBOTS/HUMANOIDS entries): type, initial pose, marker id, goals.
 
@@ -404,6 +438,7 @@ class Config:
     localization: LocalizationConfig = field(default_factory=LocalizationConfig)
     navigation: NavigationConfig = field(default_factory=NavigationConfig)
     agents: dict[str, AgentConfig] = field(default_factory=dict)
+    birdseye: BirdseyeConfig = field(default_factory=BirdseyeConfig)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
@@ -428,6 +463,15 @@ class Config:
                     rate,
                     f"must divide the camera rate cameras.rate_hz={self.cameras.rate_hz} (every n-th frame is recorded)",
                     f"use e.g. {self.cameras.rate_hz} or {self.cameras.rate_hz / 5:g}",
+                )
+        if self.birdseye.rate_hz > 0:
+            frames = self.cameras.rate_hz / self.birdseye.rate_hz
+            if frames < 1 - 1e-9 or abs(frames - round(frames)) > 1e-9:
+                raise _bad(
+                    "birdseye.rate_hz",
+                    self.birdseye.rate_hz,
+                    f"must divide the camera rate cameras.rate_hz={self.cameras.rate_hz} (every n-th camera frame is stitched)",
+                    f"use e.g. {self.cameras.rate_hz:g} or {self.cameras.rate_hz / 5:g}",
                 )
         seen_marker: dict[int, str] = {}
         ordered: dict[str, AgentConfig] = {}

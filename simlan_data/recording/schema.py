@@ -48,6 +48,7 @@ GROUND_TRUTH_POSES = "/ground_truth/poses"
 CONFIG = "/simlan/config"
 RUN_INFO = "/simlan/run_info"
 SEMANTIC_LABELS = "/simlan/semantic_labels"
+BIRDSEYE_IMAGE = "/birdseye/image"
 
 
 @dataclass(frozen=True)
@@ -170,6 +171,11 @@ GLOBAL_TOPICS: tuple[Topic, ...] = (
     Topic(CONFIG, STRING_TYPE, "the resolved run config as YAML (once)"),
     Topic(RUN_INFO, RUN_INFO_TYPE, "format version, seed, package and dependency versions, renderer (once)"),
     Topic(SEMANTIC_LABELS, SEMANTIC_LABELS_TYPE, "semantic class id -> name table (once)"),
+    Topic(
+        BIRDSEYE_IMAGE,
+        COMPRESSED_IMAGE_TYPE,
+        "stitched bird's-eye view, rgb8 JPEG, frame map, canvas as in the config's birdseye section (at birdseye.rate_hz, if > 0)",
+    ),
 )
 
 REQUIRED_TOPICS = (CLOCK, TF_STATIC, GROUND_TRUTH_POSES, CONFIG, RUN_INFO)

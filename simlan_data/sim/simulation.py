@@ -8,6 +8,7 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
                      JPEG -> localizer (search, detect, fuse) -> /camera_<id>/marker_detections
       control tick   estimates -> coordinator -> navigators -> cmd_vel -> wheel motors;
                      collision sensing; /tf, /<ns>/pose_estimate, plan, goal, status
+                     (every n-th: all frames -> bird's-eye stitcher -> JPEG -> /birdseye/image)
       physics step
 """
 
@@ -30,6 +31,7 @@ from ..gpss.localization import LocalizerParams
 from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
 from ..recording import messages as M
 from ..recording.writer import NullWriter, RecordingWriter
+from .birdseye_live import BirdseyeRecorder
 from .camera_recording import CameraRecorder
 from .publishing import Publisher, camera_tf
 from .scene import Inputs, Scene
@@ -90,6 +92,7 @@ class Simulation:
         self.depth_every = round(cfg.cameras.rate_hz / cfg.recording.depth_rate_hz)
         self.semantic_every = round(cfg.cameras.rate_hz / cfg.recording.semantic_rate_hz)
         self.steps = round(cfg.duration_s * hz)
+        self.birdseye: BirdseyeRecorder | None = None
 
     def stamp_ns(self, step: int) -> int:
         return step * NS_PER_S // self.physics_hz
@@ -122,6 +125,8 @@ class Simulation:
                     ("renderer", scene.client.backend),
                 ):
                     writer.set_metadata(f"simlan.{key}", value)
+                # set up before the clock starts, like the scene (lookup tables take a second or two)
+                self.birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
                 wall0 = time.perf_counter()
                 self._loop(scene, writer, stats, progress)
                 stats.wall_s = time.perf_counter() - wall0
@@ -197,6 +202,7 @@ class Simulation:
             stats.distance_m[a.namespace] = 0.0
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
+        birdseye = self.birdseye
         ignore = scene.world.floor
         dt_control = self.control_every / self.physics_hz
         cid = scene.client.id
@@ -220,6 +226,8 @@ class Simulation:
                             recorder.record(t, step // self.camera_every, renderer.camera, images),
                         )
                     )
+                if birdseye is not None:
+                    birdseye.tick(t, step // self.camera_every, [f[1] for f in frames])
                 loc0 = time.perf_counter()
                 stats.render_wall_s += loc0 - render0
                 for camera, images, encoded in frames:
