@@ -156,6 +156,22 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     metrics["replay.localization.frames_processed"] = float(len(frames))
     if frames:
         metrics["replay.localization.frame_ms_median"] = float(np.median(frames) * 1e3)
+        for mode in ("full", "roi"):
+            sel = [t.seconds for t in localizer.timings if t.mode == mode]
+            metrics[f"replay.localization.frames_{mode}"] = float(len(sel))
+            if sel:
+                metrics[f"replay.localization.frame_ms_median_{mode}"] = float(np.median(sel) * 1e3)
+        pl.DataFrame(
+            [(t.camera_id, t.stamp_ns, t.mode, t.seconds, t.detections) for t in localizer.timings],
+            schema={
+                "camera_id": pl.String,
+                "stamp_ns": pl.Int64,
+                "mode": pl.String,
+                "seconds": pl.Float64,
+                "detections": pl.Int64,
+            },
+            orient="row",
+        ).write_parquet(ctx.out_dir / "frame_timings.parquet")
     live = estimates_from_recording(ctx.reader, [m.namespace for m in mounts])
     diffs = []
     for ns, table in tables.items():

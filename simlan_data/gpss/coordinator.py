@@ -4,8 +4,8 @@ Every control tick each robot states its intent: its footprint now and the regio
 will sweep along its planned path over the next few metres (its *claim*). In priority order
 (robot_agent_1 first), a robot is allowed on if its claim touches neither the footprint of another
 agent (it would drive into it) nor the claim of a robot already allowed on (it would cut it off);
-otherwise it waits. A robot blocked by a waiting robot for longer than ``deadlock_after_s`` is
-told to replan around the others (head-on meetings, a robot parked in the way).
+otherwise it waits. A robot blocked for longer than ``deadlock_after_s`` by a robot that does not
+drive on either (head-on meetings, a robot parked in the way) is told to replan around the others.
 
 Pure shapely/numpy over estimated poses (never ground truth).
 """
@@ -47,21 +47,30 @@ def footprint_polygon(
     return affinity.translate(affinity.rotate(rect, yaw, origin=(0, 0), use_radians=True), x, y)
 
 
-def swept_claim(intent: Intent, *, horizon_m: float, grow_m: float, step_m: float = 0.3) -> Polygon:
-    """Union of the footprint at poses along the path ahead (heading along the path)."""
+def swept_claim(
+    intent: Intent, *, horizon_m: float, grow_m: float, step_m: float = 0.3, heading_window_m: float = 0.6
+) -> Polygon:
+    """Union of the footprint at poses along the path ahead.
+
+    The heading at a pose is that of the path's chord over ``heading_window_m`` around it: a
+    path follower cuts the small zigzags of a grid path, so the robot does not turn on each.
+    """
     shapes = [footprint_polygon(intent.pose_xyyaw, intent.footprint_m, grow_m=grow_m)]
     path = intent.path_ahead_xy
     if path is not None and len(path) >= 2:
-        seg = np.diff(path, axis=0)
-        lengths = np.linalg.norm(seg, axis=1)
+        lengths = np.linalg.norm(np.diff(path, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(lengths)])
+        if cum[-1] < 1e-9:
+            return shapes[0]
+
+        def at(s: float) -> NDArray[np.float64]:
+            return np.array([np.interp(s, cum, path[:, 0]), np.interp(s, cum, path[:, 1])])
+
+        half = 0.5 * heading_window_m
         for s in np.arange(step_m, min(horizon_m, cum[-1]) + 1e-9, step_m):
-            i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(lengths) - 1))
-            if lengths[i] < 1e-9:
-                continue
-            t = (s - cum[i]) / lengths[i]
-            p = path[i] + t * seg[i]
-            yaw = float(np.arctan2(seg[i][1], seg[i][0]))
+            p = at(s)
+            d = at(min(s + half, cum[-1])) - at(max(s - half, 0.0))
+            yaw = float(np.arctan2(d[1], d[0]))
             shapes.append(
                 footprint_polygon((float(p[0]), float(p[1]), yaw), intent.footprint_m, grow_m=grow_m)
             )
@@ -72,7 +81,7 @@ def swept_claim(intent: Intent, *, horizon_m: float, grow_m: float, step_m: floa
 class Decision:
     speed_limit_mps: float | None  # 0 = wait, None = free
     blocked_by: tuple[str, ...] = ()
-    replan: bool = False
+    replan: bool = False  # look for a way around the others (see Coordinator)
 
 
 @dataclass
@@ -84,6 +93,7 @@ class Coordinator:
     deadlock_after_s: float = 3.0
     _waiting_since: dict[str, int] = field(default_factory=dict)
     waits: dict[str, int] = field(default_factory=dict)  # ticks spent waiting, per robot
+    granted: set[str] = field(default_factory=set)  # robots allowed on at the last decision
 
     def decide(self, t_ns: int, intents: list[Intent]) -> dict[str, Decision]:
         grow = 0.5 * self.safety_distance_m
@@ -93,6 +103,7 @@ class Coordinator:
             for i in intents
             if i.path_ahead_xy is not None
         }
+        priority = {i.namespace: i.priority for i in intents}
         granted: dict[str, Polygon] = {}
         out: dict[str, Decision] = {}
         for intent in sorted(intents, key=lambda i: i.priority):
@@ -107,10 +118,26 @@ class Coordinator:
                 self._waiting_since.pop(ns, None)
                 out[ns] = Decision(None)
                 continue
-            since = self._waiting_since.setdefault(ns, t_ns)
+            self._waiting_since.setdefault(ns, t_ns)
             self.waits[ns] = self.waits.get(ns, 0) + 1
-            replan = (t_ns - since) >= self.deadlock_after_s * NS_PER_S
-            if replan:
+            out[ns] = Decision(0.0, tuple(sorted(blockers)))
+        self.granted = set(granted)
+        # Who looks for a way round: a robot that has waited deadlock_after_s for a robot that is
+        # not driving on (waiting as well, parked, a person, unlocalized). In a mutual wait the one
+        # of lower priority goes first; if it found no way round, after twice the time the other
+        # one tries too.
+        limit = self.deadlock_after_s * NS_PER_S
+        for ns, decision in out.items():
+            if decision.speed_limit_mps != 0.0:
+                continue
+            waited = t_ns - self._waiting_since[ns]
+            stuck = [b for b in decision.blocked_by if b not in granted]
+            if not stuck or waited < limit:
+                continue
+            yields_first = all(
+                priority[ns] > priority[b] for b in stuck if b in out and out[b].speed_limit_mps == 0.0
+            )
+            if yields_first or waited >= 2 * limit:
+                decision.replan = True
                 self._waiting_since[ns] = t_ns  # give the new plan time before asking again
-            out[ns] = Decision(0.0, tuple(sorted(blockers)), replan)
         return out

@@ -51,6 +51,8 @@ class LocalizerParams:
     accel_noise_mps2: float = 0.25  # how far the robot strays from its commanded speed (m/s^2)
     yaw_accel_noise_rps2: float = 0.4  # and from its commanded yaw rate (rad/s^2)
     gate_sigma: float = 8.0  # fixes farther than this (Mahalanobis) from the prediction are outliers
+    reset_after_rejected: int = 3  # so many outliers in a row: the filter is wrong (a robot stopped
+    # by a collision), restart it from the next fix
     roi_margin_px: int = 24
     full_search_every: int = (
         5  # while an agent is untracked, search each camera's whole image every n-th frame (staggered)
@@ -182,6 +184,7 @@ class _Track:
     last_cameras: tuple[str, ...] = ()
     fixes: int = 0
     rejected: int = 0
+    rejected_in_row: int = 0
 
 
 @dataclass
@@ -355,11 +358,17 @@ class Localizer:
         while self._pending and self._pending[0][0] <= t_ns:
             _, fix = self._pending.popleft()
             track = self._tracks[fix.namespace]
-            if track.last_fix_ns is None or not self._tracked(track, fix.stamp_ns):
+            if (
+                track.last_fix_ns is None
+                or not self._tracked(track, fix.stamp_ns)
+                or track.rejected_in_row >= self.params.reset_after_rejected
+            ):
                 track.ekf.reset(fix)
             elif not track.ekf.update(fix, self.params.gate_sigma):
                 track.rejected += 1
+                track.rejected_in_row += 1
                 continue
+            track.rejected_in_row = 0
             track.last_fix_ns = fix.stamp_ns
             track.last_cameras = fix.cameras
             track.fixes += 1

@@ -58,27 +58,50 @@ class Navigator:
             return None
         return self.goals[self.index]
 
-    def _make_plan(self, x: float, y: float, blocked: NDArray[np.bool_] | None = None) -> None:
+    def _make_plan(self, x: float, y: float) -> None:
         goal = self.goal
         assert goal is not None
         try:
-            plan = self.planner.plan((x, y), (float(goal[0]), float(goal[1])), blocked=blocked)
+            plan = self.planner.plan((x, y), (float(goal[0]), float(goal[1])))
         except PlanningError as err:
-            if blocked is not None:  # no detour: keep the old plan and wait
-                return
             self.status.failures.append(str(err))
             self.status.goals_failed += 1
             self._advance()
             return
-        if blocked is not None and self.follower is not None:
-            remaining = self.follower.remaining_m()
-            if plan.length_m > DETOUR_MAX_FACTOR * remaining + DETOUR_MAX_EXTRA_M:
-                return  # a long way round (maybe out of camera coverage): rather wait
+        self._adopt(plan)
+
+    def detour(self, x: float, y: float, blocked: NDArray[np.bool_]) -> Plan | None:
+        """A path to the current goal that avoids ``blocked`` cells, or None if there is none that
+        is not much longer than the rest of the current path (a long way round, maybe out of
+        camera coverage: rather wait). The caller checks it and ``adopt``s it."""
+        goal = self.goal
+        if goal is None:
+            return None
+        remaining = (
+            self.follower.remaining_m()
+            if self.follower is not None
+            else float(np.hypot(goal[0] - x, goal[1] - y))
+        )
+        try:
+            return self.planner.plan(
+                (x, y),
+                (float(goal[0]), float(goal[1])),
+                blocked=blocked,
+                max_length_m=DETOUR_MAX_FACTOR * remaining + DETOUR_MAX_EXTRA_M,
+            )
+        except PlanningError:
+            return None
+
+    def adopt(self, plan: Plan) -> None:
+        """Follow ``plan`` (a detour) from now on."""
+        self._adopt(plan)
+
+    def _adopt(self, plan: Plan) -> None:
         self.plan = plan
-        self.follower = PathFollower(self.plan.points_xy, self.pursuit)
+        self.follower = PathFollower(plan.points_xy, self.pursuit)
         self.status.plans += 1
         if self._goal_first_plan:
-            self.status.planned_length_m += self.plan.length_m
+            self.status.planned_length_m += plan.length_m
             self._goal_first_plan = False
         self.new_plan = True
 
@@ -111,8 +134,6 @@ class Navigator:
         pose_xyyaw: tuple[float, float, float] | None,
         dt_s: float,
         decision: Decision | None = None,
-        *,
-        blocked: NDArray[np.bool_] | None = None,
     ) -> tuple[float, float]:
         """Twist for the next ``dt_s`` given the estimated pose (None: no valid estimate)."""
         if self.goal is None:
@@ -126,8 +147,6 @@ class Navigator:
             self._make_plan(x, y)
             if self.follower is None:
                 return 0.0, 0.0
-        if decision is not None and decision.replan and blocked is not None:
-            self._make_plan(x, y, blocked=blocked)
         limit = None if decision is None else decision.speed_limit_mps
         assert self.follower is not None
         v, w = self.follower.step(x, y, yaw, dt_s, speed_limit_mps=limit)

@@ -79,8 +79,13 @@ class GridPlanner:
         goal_xy: tuple[float, float],
         *,
         blocked: NDArray[np.bool_] | None = None,
+        max_length_m: float = np.inf,
     ) -> Plan:
-        """Shortest path (by clearance-weighted length) from start to goal; raises PlanningError."""
+        """Shortest path (by clearance-weighted length) from start to goal; raises PlanningError.
+
+        ``max_length_m`` bounds the search: no path is sought that is longer (a detour that
+        would not be taken anyway costs nothing instead of a search of the whole building).
+        """
         free = self.free if blocked is None else self.free & ~blocked
         start = self.nearest_free(self.grid.to_cell(start_xy))
         goal = self.grid.to_cell(goal_xy)
@@ -98,8 +103,11 @@ class GridPlanner:
         heap: list[tuple[float, float, int, int]] = [(0.0, 0.0, start[0], start[1])]
         closed = np.zeros(free.shape, dtype=bool)
         expanded = 0
+        max_cost = max_length_m / self.grid.resolution_m
         while heap:
-            _, cost, r, c = heapq.heappop(heap)
+            f, cost, r, c = heapq.heappop(heap)
+            if f > max_cost:
+                break
             if closed[r, c]:
                 continue
             closed[r, c] = True
@@ -135,21 +143,28 @@ class GridPlanner:
         length = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
         return Plan(points, length, expanded)
 
-    def _segment_free(self, a: NDArray[np.float64], b: NDArray[np.float64], free: NDArray[np.bool_]) -> bool:
+    def _segment_ok(
+        self, a: NDArray[np.float64], b: NDArray[np.float64], free: NDArray[np.bool_], max_penalty: float
+    ) -> bool:
         n = max(2, int(np.ceil(np.linalg.norm(b - a) / (0.5 * self.grid.resolution_m))))
         for t in np.linspace(0.0, 1.0, n):
             cell = self.grid.to_cell(a + t * (b - a))
-            if not self.grid.inside(cell) or not free[cell] or self.penalty[cell] > 0.5 * self.penalty.max():
+            if not self.grid.inside(cell) or not free[cell] or self.penalty[cell] > max_penalty:
                 return False
         return True
 
     def _smooth(self, points: NDArray[np.float64], free: NDArray[np.bool_]) -> NDArray[np.float64]:
-        """Drop intermediate points while the straight segment stays clear (string pulling)."""
+        """Drop intermediate points while the straight segment stays free and no closer to
+        obstacles than the grid path it replaces (string pulling; a shortcut may not cut a corner
+        the search kept away from, but may run straight through a narrow gap)."""
+        penalty = np.array([self.penalty[self.grid.to_cell(p)] for p in points])
         out = [points[0]]
         i = 0
         while i < len(points) - 1:
             j = len(points) - 1
-            while j > i + 1 and not self._segment_free(points[i], points[j], free):
+            while j > i + 1 and not self._segment_ok(
+                points[i], points[j], free, float(penalty[i : j + 1].max()) + 1e-6
+            ):
                 j = max(i + 1, (i + j) // 2) if j - i > 8 else j - 1
             out.append(points[j])
             i = j

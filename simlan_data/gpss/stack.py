@@ -16,10 +16,12 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from shapely.geometry import MultiPolygon, Polygon
+from shapely.ops import unary_union
 
 from ..agent_types import MARKER_SIZE_M, AgentType
 from ..geometry.camera import CameraModel
-from .coordinator import Coordinator, Decision, Intent, swept_claim
+from .coordinator import Coordinator, Decision, Intent, footprint_polygon, swept_claim
 from .follower import FollowerParams, PursuitParams, WaypointFollower
 from .localization import Localizer, LocalizerParams, PoseEstimate
 from .markers import MarkerMount
@@ -159,33 +161,77 @@ class GpssStack:
             out.decisions = self.coordinator.decide(t_ns, intents)
         for ns, nav in self.navigators.items():
             decision = out.decisions.get(ns)
-            blocked = None
-            if decision is not None and decision.replan:
-                blocked = self._others_mask(ns, [i for i in intents if i.namespace != ns])
-            out.commands[ns] = nav.step(poses.get(ns), dt_s, decision, blocked=blocked)
+            if decision is not None and decision.replan and ns in poses:
+                self._detour(ns, poses[ns], [i for i in intents if i.namespace != ns])
+            out.commands[ns] = nav.step(poses.get(ns), dt_s, decision)
         for ns, walker in self.walkers.items():
             x, y, yaw = truth[ns]
             cmd = walker.step(x, y, yaw, dt_s)
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
         return out
 
-    def _others_mask(self, ns: str, others: list[Intent]) -> NDArray[np.bool_]:
-        """Grid cells a detour of ``ns`` must avoid: where the others stand and where they will drive.
+    def _detour(self, ns: str, pose: tuple[float, float, float], others: list[Intent]) -> bool:
+        """Plan ``ns`` around the others; adopt the plan only if the coordinator will let it drive.
 
-        Grown by the robot's half width plus the coordinator's safety distance, so that a detour
-        the planner finds is one the coordinator lets it drive.
+        The detour must keep clear of the robots that drive on (their claims) and of the others'
+        footprints. The planner keeps the robot's centre a margin away from them; a long robot
+        swings its ends out in turns, so the margin grows from its half width to its
+        circumradius until the swept footprint of the whole detour is clear.
+        """
+        nav, kind = self.navigators[ns], self.agents[ns].kind
+        x0, x1, y0, y1 = kind.footprint_m
+        reach = float(np.hypot(max(abs(x0), abs(x1)), max(abs(y0), abs(y1))))
+        c = self.coordinator
+        obstacles = unary_union(
+            [
+                swept_claim(o, horizon_m=c.horizon_m, grow_m=0.5 * c.safety_distance_m)
+                if o.namespace in c.granted
+                else footprint_polygon(o.pose_xyyaw, o.footprint_m, grow_m=0.5 * c.safety_distance_m)
+                for o in others
+            ]
+        )
+        for margin in np.linspace(kind.half_width_m, reach, 5):
+            plan = nav.detour(pose[0], pose[1], self._others_mask(ns, pose, others, margin))
+            if plan is None:
+                continue
+            probe = Intent(ns, 0, pose, kind.footprint_m, plan.points_xy)
+            length = float(np.sum(np.linalg.norm(np.diff(plan.points_xy, axis=0), axis=1)))
+            claim = swept_claim(probe, horizon_m=length, grow_m=0.5 * c.safety_distance_m)
+            # its own footprint now may touch others (that is why it waits): check the path ahead
+            ahead = claim.difference(
+                footprint_polygon(pose, kind.footprint_m, grow_m=0.5 * c.safety_distance_m)
+            )
+            if not ahead.intersects(obstacles):
+                nav.adopt(plan)
+                return True
+        return False
+
+    def _others_mask(
+        self, ns: str, pose: tuple[float, float, float], others: list[Intent], margin_m: float
+    ) -> NDArray[np.bool_]:
+        """Grid cells the centre of ``ns`` must avoid on a detour: where the others stand, and where
+        the ones that drive on will drive, grown by ``margin_m`` plus the safety distance. The
+        robot's own footprint is left free: it may stand closer than that to the robot it waits
+        for and must be able to back away.
         """
         mask = np.zeros(self.grid.shape, dtype=np.uint8)
-        grow = self.agents[ns].kind.half_width_m + self.nav.safety_distance_m
-        x0, y0 = self.grid.origin_xy_m
+        grow = margin_m + self.nav.safety_distance_m
         for other in others:
-            shape = swept_claim(other, horizon_m=self.coordinator.horizon_m, grow_m=grow)
-            polys = getattr(shape, "geoms", [shape])
-            for poly in polys:
-                pts = np.asarray(poly.exterior.coords)[:, :2]
-                px = np.stack(
-                    [(pts[:, 0] - x0) / self.grid.resolution_m, (pts[:, 1] - y0) / self.grid.resolution_m],
-                    axis=1,
-                )
-                cv2.fillPoly(mask, [np.round(px).astype(np.int32)], 1)
+            moving = other.namespace in self.coordinator.granted
+            shape = (
+                swept_claim(other, horizon_m=self.coordinator.horizon_m, grow_m=grow)
+                if moving
+                else footprint_polygon(other.pose_xyyaw, other.footprint_m, grow_m=grow)
+            )
+            self._fill(mask, shape, 1)
+        self._fill(mask, footprint_polygon(pose, self.agents[ns].kind.footprint_m), 0)
         return mask.astype(bool)
+
+    def _fill(self, mask: NDArray[np.uint8], shape: Polygon | MultiPolygon, value: int) -> None:
+        x0, y0 = self.grid.origin_xy_m
+        for poly in getattr(shape, "geoms", [shape]):
+            pts = np.asarray(poly.exterior.coords)[:, :2]
+            px = np.stack(
+                [(pts[:, 0] - x0) / self.grid.resolution_m, (pts[:, 1] - y0) / self.grid.resolution_m], axis=1
+            )
+            cv2.fillPoly(mask, [np.round(px).astype(np.int32)], value)
