@@ -9,6 +9,7 @@ import sys
 from collections.abc import Callable
 from typing import NoReturn, TextIO
 
+import yaml
 from hydra.errors import HydraException
 from omegaconf.errors import OmegaConfBaseException
 
@@ -59,6 +60,16 @@ def _group_options(message: str) -> str:
     return f" (options: {', '.join(options)})" if options else ""
 
 
+def _in_chain(err: BaseException | None, kind: type[BaseException]) -> BaseException | None:
+    """The first exception of type ``kind`` among ``err`` and its causes."""
+    seen = 0
+    while err is not None and seen < 20:
+        if isinstance(err, kind):
+            return err
+        err, seen = err.__cause__ or err.__context__, seen + 1
+    return None
+
+
 def fail(message: str, code: int) -> NoReturn:
     sys.stderr.write(f"error: {message}\n")
     sys.stderr.flush()
@@ -77,7 +88,7 @@ def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
         sys.argv.remove("--debug")
     os.environ["HYDRA_FULL_ERROR"] = "1"
     real_stderr = sys.stderr
-    sys.stderr = _StderrWithoutHydraJobError(real_stderr)  # type: ignore[assignment]
+    sys.stderr = _StderrWithoutHydraJobError(real_stderr)
     try:
         main()
     except SystemExit:
@@ -90,12 +101,26 @@ def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
         ours = _root_simlan_error(err)
         if ours is not None:
             fail(ours.line(), ours.exit_code)
+        bad_yaml = _in_chain(err, yaml.MarkedYAMLError)
+        if isinstance(bad_yaml, yaml.MarkedYAMLError):  # a config file that is not valid YAML
+            mark = bad_yaml.problem_mark
+            where = f"{mark.name}, line {mark.line + 1}" if mark is not None else "a config file"
+            fail(
+                f"invalid configuration file {where}: {bad_yaml.problem}; fix the YAML there", EXIT_BAD_INPUT
+            )
         if isinstance(err, (HydraException, OmegaConfBaseException)):
             msg = _first_line(str(err)) + _group_options(str(err))
             cause = err.__cause__
             if cause is not None and _first_line(str(cause)) and _first_line(str(cause)) not in msg:
                 msg += f": {_first_line(str(cause))}"
-            fail(f"invalid configuration: {msg}; see --help for the valid groups and keys", EXIT_BAD_INPUT)
+            fix = "see --help for the valid groups and keys"
+            if "is not a subclass of AgentConfig" in msg:
+                # OmegaConf cannot add an entry to a typed dict from the command line
+                fix = (
+                    "new agents go in a spawn list file: write DIR/agents/NAME.yaml like "
+                    "conf/agents/four_robots.yaml and run with 'hydra.searchpath=[file://DIR]' agents=NAME"
+                )
+            fail(f"invalid configuration: {msg}; {fix}", EXIT_BAD_INPUT)
         fail(
             f"run failed: {type(err).__name__}: {_first_line(str(err))} (rerun with --debug for the traceback)",
             EXIT_FAILED_RUN,

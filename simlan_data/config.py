@@ -17,7 +17,7 @@ from omegaconf import MISSING
 from .errors import ConfigError
 from .gpss.birdseye import CanvasSpec
 
-NAMESPACE_RE = re.compile(r"^robot_agent_(\d+)$")
+NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
 STREAMS = ("rgb", "depth", "semantic")
 RGB_ENCODINGS = ("jpeg", "png", "raw")
 DEPTH_ENCODINGS = ("png", "raw")

@@ -36,6 +36,24 @@ def _one_error_line(stderr: str) -> str:
         (["agents.robot_agent_1.pose=[-13.0,4.0,0.0]"], "footprint overlaps"),
         (["agents.robot_agent_1.pose=[100.0,0.0,0.0]"], "footprint leaves the building"),
         (["cameras.rate_hz=7"], "invalid cameras.rate_hz=7.0"),
+        # spawn lists
+        (
+            ["agents=four_robots", "agents.robot_agent_3.marker_id=1"],
+            "marker_id=1 in config: already used by robot_agent_1",
+        ),
+        (
+            ["agents=four_robots", "agents.robot_agent_2.pose=[-20.5,1.5,0.0]"],
+            "agents.robot_agent_2.pose=[-20.5, 1.5, 0.0] in config: its footprint overlaps robot_agent_1's",
+        ),
+        (["agents.robot_agent_1.marker_id=1000"], "DICT_5X5_1000 has ids 0..999"),
+        (
+            ["agents.robot_agent_1.goals=[[0.0,3.5]]"],
+            "goals[0]=[0.0, 3.5] in config: the goal is inside an obstacle",
+        ),
+        (
+            ["+agents.robot_agent_5={type:jackal,pose:[0.0,0.0,0.0]}"],
+            "new agents go in a spawn list file: write DIR/agents/NAME.yaml",
+        ),
     ],
 )
 def test_bad_config_gives_one_line_and_exit_2(tmp_path: Path, overrides: list[str], expected: str) -> None:
@@ -45,6 +63,28 @@ def test_bad_config_gives_one_line_and_exit_2(tmp_path: Path, overrides: list[st
     line = _one_error_line(proc.stderr)
     assert expected in line, line
     assert not (run_dir / "recording").exists()
+
+
+def test_spawn_list_files_from_the_users_directory(tmp_path: Path) -> None:
+    """Spawn lists outside the package (hydra.searchpath); a repeated namespace is a clear error."""
+    (tmp_path / "conf" / "agents").mkdir(parents=True)
+    spawn = tmp_path / "conf" / "agents" / "mine.yaml"
+    header = "# @package _global_\nagents:\n  robot_agent_1: {type: pallet_truck, pose: [-16.0, 0.4, 0.0]}\n"
+    spawn.write_text(header + "  robot_agent_1: {type: jackal, pose: [-10.0, 0.4, 0.0]}\n")
+    common = [f"hydra.searchpath=[file://{tmp_path / 'conf'}]", "agents=mine", "progress=false"]
+    proc = run_cli(*common, f"hydra.run.dir={tmp_path / 'run1'}")
+    assert proc.returncode == 2, proc.stderr
+    line = _one_error_line(proc.stderr)
+    assert "mine.yaml, line 4: found duplicate key robot_agent_1" in line, line
+    spawn.write_text(header + "  robot_agent_01: {type: jackal, pose: [-10.0, 0.4, 0.0]}\n")
+    proc = run_cli(*common, f"hydra.run.dir={tmp_path / 'run2'}")
+    assert proc.returncode == 2 and "invalid agents='robot_agent_01'" in _one_error_line(proc.stderr)
+    spawn.write_text(header + "  robot_agent_7: {type: jackal, pose: [-10.0, 0.4, 0.0]}\n")
+    cfg = to_config(compose_config("agents=mine", f"hydra.searchpath=[file://{tmp_path / 'conf'}]"))
+    assert [(a.namespace, a.type, a.marker_id) for a in cfg.agent_list] == [
+        ("robot_agent_1", "pallet_truck", 1),
+        ("robot_agent_7", "jackal", 7),
+    ]
 
 
 def test_missing_calibration_file(tmp_path: Path) -> None:

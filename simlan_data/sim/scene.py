@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from shapely.geometry import Polygon
 
 from .._pybullet import pb
 from ..agent_types import AgentType, agent_type
@@ -89,6 +90,7 @@ def load_inputs(cfg: Config) -> Inputs:
     types = {a.namespace: agent_type(a.type, where=f"agents.{a.namespace}.type") for a in cfg.agent_list}
     for a in cfg.agent_list:
         check_spawn_pose(a, types[a.namespace], cfg.world.fidelity)
+    check_agents_apart(cfg.agent_list, types)
     nav = cfg.navigation
     if nav.map == "simlan":
         grid = grid_from_nav2_map(MAPS_DIR / "warehouse.yaml", resolution_m=nav.resolution_m)
@@ -117,6 +119,20 @@ def footprint_corners(kind: AgentType, pose: list[float]) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     local = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
     return local @ np.array([[c, s], [-s, c]]) + [x, y]
+
+
+def check_agents_apart(agents: list[AgentConfig], types: dict[str, AgentType]) -> None:
+    """Refuse two agents whose footprints overlap at spawn."""
+    shapes = {a.namespace: Polygon(footprint_corners(types[a.namespace], list(a.pose))) for a in agents}
+    for i, a in enumerate(agents):
+        for b in agents[:i]:
+            if shapes[a.namespace].intersects(shapes[b.namespace]):
+                raise ConfigError(
+                    f"invalid agents.{a.namespace}.pose={list(a.pose)}",
+                    "config",
+                    f"its footprint overlaps {b.namespace}'s (at {list(b.pose)})",
+                    "spawn every agent on its own spot of the floor",
+                )
 
 
 def check_spawn_pose(agent: AgentConfig, kind: AgentType, fidelity: str) -> None:
