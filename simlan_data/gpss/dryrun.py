@@ -69,7 +69,8 @@ def dry_run(
             poses[ns] = np.array(
                 [x + v * np.cos(yaw) * dt, y + v * np.sin(yaw) * dt, wrap_angle(yaw + w * dt)]
             )
-            traj[ns].append((t, *map(float, poses[ns])))
+            px, py, pyaw = (float(v) for v in poses[ns])
+            traj[ns].append((t, px, py, pyaw))
         for ns, navigator in stack.navigators.items():
             if finished[ns] is None and navigator.goal is None:
                 finished[ns] = t

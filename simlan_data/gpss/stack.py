@@ -85,7 +85,7 @@ class GpssStack:
                 (a.kind.marker_xyz[0], a.kind.marker_xyz[1]),
             )
             for a in agents
-            if a.kind.has_marker and a.marker_id is not None and a.kind.drive == "diff"
+            if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"
         ]
         self.localizer = Localizer(cameras, mounts, loc)
         self.coordinator = Coordinator(safety_distance_m=nav.safety_distance_m)
