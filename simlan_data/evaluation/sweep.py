@@ -1,0 +1,148 @@
+"""Aggregate a Hydra sweep: every job's ``metrics.json`` into one polars table.
+
+    python -m simlan_data.run -m KEY=A,B ...      # each job writes <sweep dir>/<n>/metrics.json
+        -> on_multirun_end (any launcher: basic, joblib, ray; runs where the sweep was started)
+        -> <sweep dir>/sweep_metrics.parquet + .csv   one row per job
+        -> the experiment's report (a registered function), if ``report`` names one
+
+Columns: ``job`` (the sweep subdirectory), ``override.<key>`` for every command-line or sweeper
+override of the job (as Hydra recorded it in ``.hydra/overrides.yaml``), ``status`` (ok, or
+failed when the job left no metrics.json), then every metric.
+
+An experiment names its report in its config::
+
+    hydra:
+      callbacks:
+        aggregate_sweep:
+          report: rtf
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import polars as pl
+import yaml
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig
+
+from ..constants import METRICS_FILENAME
+from ..errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+SWEEP_TABLE_STEM = "sweep_metrics"
+
+# name -> function(table, sweep_dir) that writes the experiment's own tables and plots
+SweepReport = Callable[[pl.DataFrame, Path], None]
+SWEEP_REPORTS: dict[str, SweepReport] = {}
+
+
+def register_sweep_report(name: str) -> Callable[[SweepReport], SweepReport]:
+    """Register ``fn(table, sweep_dir)`` as the report an experiment can name."""
+
+    def wrap(fn: SweepReport) -> SweepReport:
+        SWEEP_REPORTS[name] = fn
+        return fn
+
+    return wrap
+
+
+def _overrides(job_dir: Path) -> dict[str, Any]:
+    path = job_dir / ".hydra" / "overrides.yaml"
+    if not path.is_file():
+        return {}
+    out: dict[str, Any] = {}
+    for item in yaml.safe_load(path.read_text()) or []:
+        key, _, value = str(item).partition("=")
+        key = key.lstrip("+~")
+        try:
+            out[f"override.{key}"] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            out[f"override.{key}"] = value
+    return out
+
+
+def _job_dirs(sweep_dir: Path) -> list[Path]:
+    """Sweep subdirectories that hold a Hydra job (``.hydra/``), in job order."""
+    dirs = [p for p in sweep_dir.iterdir() if p.is_dir() and (p / ".hydra").is_dir()]
+    return sorted(dirs, key=lambda p: (not p.name.isdigit(), int(p.name) if p.name.isdigit() else 0, p.name))
+
+
+def collect_sweep(sweep_dir: str | Path) -> pl.DataFrame:
+    """One row per job of the sweep in ``sweep_dir``: its overrides, status and metrics.
+
+    Raises:
+        ConfigError: ``sweep_dir`` is not a directory or holds no Hydra job.
+    """
+    root = Path(sweep_dir)
+    if not root.is_dir():
+        raise ConfigError(
+            "not a sweep directory", str(root), "it does not exist", "give the directory of a -m run"
+        )
+    jobs = _job_dirs(root)
+    if not jobs:
+        raise ConfigError(
+            "no sweep jobs", str(root), "no subdirectory with a .hydra/ folder", "give the directory of a -m run"
+        )
+    rows: list[dict[str, Any]] = []
+    for job in jobs:
+        row: dict[str, Any] = {"job": job.name, **_overrides(job)}
+        metrics_path = job / METRICS_FILENAME
+        if metrics_path.is_file():
+            row["status"] = "ok"
+            row.update({k: float(v) for k, v in json.loads(metrics_path.read_text()).items()})
+        else:
+            row["status"] = "failed"
+        rows.append(row)
+    # overrides may mix types across jobs (1 and 1.5): let polars widen, strings stay strings
+    return pl.DataFrame(rows, infer_schema_length=None, strict=False)
+
+
+def write_sweep_table(table: pl.DataFrame, sweep_dir: Path) -> tuple[Path, Path]:
+    """Write ``sweep_metrics.parquet`` and ``.csv`` into ``sweep_dir``; returns both paths."""
+    parquet = sweep_dir / f"{SWEEP_TABLE_STEM}.parquet"
+    csv = sweep_dir / f"{SWEEP_TABLE_STEM}.csv"
+    table.write_parquet(parquet)
+    flat = table.select([c for c, t in table.schema.items() if not isinstance(t, (pl.List, pl.Struct))])
+    flat.write_csv(csv)
+    return parquet, csv
+
+
+def aggregate(sweep_dir: str | Path, report: str = "") -> pl.DataFrame:
+    """Collect, write the table and run the named report; returns the table."""
+    root = Path(sweep_dir)
+    if report and report not in SWEEP_REPORTS:
+        raise ConfigError(
+            f"unknown sweep report {report!r}",
+            "hydra.callbacks.aggregate_sweep.report",
+            f"known: {', '.join(sorted(SWEEP_REPORTS)) or '(none)'}",
+            "pick one or leave it empty",
+        )
+    table = collect_sweep(root)
+    parquet, _ = write_sweep_table(table, root)
+    failed = table.filter(pl.col("status") == "failed").height
+    print(f"sweep: {table.height} jobs ({failed} failed) -> {parquet}", flush=True)
+    if report:
+        SWEEP_REPORTS[report](table, root)
+    return table
+
+
+class AggregateSweep(Callback):
+    """Hydra callback: aggregate the sweep's metrics when every job has returned."""
+
+    def __init__(self, report: str = "") -> None:
+        self.report = report
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:  # noqa: ARG002 - Hydra API
+        sweep_dir = Path(str(config.hydra.sweep.dir))
+        if not sweep_dir.is_dir():
+            return
+        try:
+            aggregate(sweep_dir, self.report)
+        except ConfigError as err:
+            log.warning("sweep aggregation skipped: %s", err.line())
