@@ -87,7 +87,10 @@ def collect_sweep(sweep_dir: str | Path) -> pl.DataFrame:
     jobs = _job_dirs(root)
     if not jobs:
         raise ConfigError(
-            "no sweep jobs", str(root), "no subdirectory with a .hydra/ folder", "give the directory of a -m run"
+            "no sweep jobs",
+            str(root),
+            "no subdirectory with a .hydra/ folder",
+            "give the directory of a -m run",
         )
     rows: list[dict[str, Any]] = []
     for job in jobs:
