@@ -48,6 +48,7 @@ class RunStats:
 
     sim_duration_ns: int = 0
     wall_s: float = 0.0
+    cameras: int = 0
     cpu_s: float = 0.0  # CPU time of the whole process (every thread) during the loop
     main_cpu_s: float = 0.0  # CPU time of the simulation thread during the loop
     physics_steps: int = 0
@@ -70,6 +71,7 @@ class RunStats:
         out: dict[str, float] = {
             "sim.rtf": sim_s / self.wall_s if self.wall_s > 0 else 0.0,
             "sim.duration_s": sim_s,
+            "sim.cameras": float(self.cameras),
             "sim.wall_s": self.wall_s,
             "sim.cpu_s": self.cpu_s,
             "sim.main_thread_cpu_s": self.main_cpu_s,
@@ -109,7 +111,9 @@ class Simulation:
     def run(self, bag_path: Path, *, progress: Callable[[float], None] | None = None) -> RunStats:
         """Simulate ``duration_s`` and write the bag at ``bag_path`` (which must not exist)."""
         cfg = self.cfg
-        stats = RunStats(calibration_issues=list(self.inputs.calibration_issues))
+        stats = RunStats(
+            calibration_issues=list(self.inputs.calibration_issues), cameras=len(self.inputs.cameras)
+        )
         scene = Scene.build(cfg, self.inputs)
         stats.renderer = scene.client.backend
         stats.layout_notes = list(scene.world.layout_conflicts)
