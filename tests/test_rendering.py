@@ -214,3 +214,40 @@ def test_merge_rects() -> None:
         (0, 0, 10, 10),
         (200, 200, 210, 210),
     ]
+
+
+def test_static_layer_follows_a_pushed_object_and_the_meshes_go_away_again() -> None:
+    """A world object moved (a robot pushed it): the cameras that see it render their static layer
+    again with the warehouse meshes back for that moment, then the meshes are removed again; the
+    layered image still equals the full render."""
+    from conftest import compose_config
+    from simlan_data.run import to_config
+    from simlan_data.sim.scene import Scene, load_inputs
+
+    cfg = to_config(compose_config("cameras=single", "world.settle_s=0.5", "progress=false"))
+    scene = Scene.build(cfg, load_inputs(cfg))
+    try:
+        (renderer,) = scene.renderers
+        assert scene.meshes is not None and not scene.meshes.present
+        cam, cid = renderer.camera, scene.client.id
+        assert scene.world.movable, "the default warehouse has movable boxes and pallets"
+        body = sorted(scene.world.movable)[0]
+        assert renderer._static is not None and renderer._static[2] is not None
+        before = renderer._static[2].copy()
+        pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+        centre, _ = cam.intersect_plane_z([[300.0, 200.0]], 0.0)  # beside the truck's aisle
+        pb.resetBasePositionAndOrientation(
+            body, [float(centre[0, 0]), float(centre[0, 1]), pos[2]], orn, physicsClientId=cid
+        )
+        assert scene.refresh_static_layers() == 1
+        assert (renderer._static[2] != before).sum() > 50  # the object shows at its new place
+        assert not scene.meshes.present
+        layered = renderer.render(scene.moved_boxes())
+        full = CameraRenderer(scene.client, cam, scene.labels, layered=False)
+        with scene.meshes.shown():
+            reference = full.render()
+        same_labels, same_depth, same_rgb = _equal_fractions(layered, reference, renderer.valid_mask)
+        assert same_labels >= 0.995 and same_depth >= 0.995 and same_rgb >= 0.99
+        assert not scene.meshes.present
+    finally:
+        scene.close()
