@@ -390,7 +390,7 @@ def main() -> None:
                     raw["gpss"]["depth + labels recorded at 1 Hz (default)"]["run_dir"]
                 )
                 / "recording",
-                f"the same configuration, {full_s:g} s (the multi_robot scenario's length)": long_dir
+                f"the same configuration, {full_s:g} s{'' if quick else ' (the scenario length)'}": long_dir
                 / "recording",
             }
             md, raw["replay"] = replay(recordings, out)
