@@ -53,11 +53,13 @@ def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     return "\n".join(out)
 
 
-def run_cli(*args: str, timeout: float = 3600) -> subprocess.CompletedProcess[str]:
+def run_cli(
+    *args: str, timeout: float = 3600, module: str = "simlan_data.run"
+) -> subprocess.CompletedProcess[str]:
     env = {**os.environ}
     env.pop("HYDRA_FULL_ERROR", None)
     return subprocess.run(
-        [sys.executable, "-m", "simlan_data.run", *args],
+        [sys.executable, "-m", module, *args],
         capture_output=True,
         text=True,
         cwd=REPO,

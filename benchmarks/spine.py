@@ -22,6 +22,7 @@ from simlan_data._pybullet import pb
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.recording.codecs import encode_depth, encode_labels, encode_rgb
 from simlan_data.sim.agents import AGENT_TYPES, DiffDriveAgent
+from simlan_data.sim.dynamic_layer import MovedAgents
 from simlan_data.sim.pybullet_client import connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
 from simlan_data.world.builder import build_world
@@ -60,13 +61,15 @@ def renderer_speed(frames: int) -> tuple[str, dict]:
             )
             labels.set(agent.body, agent.label)
             agent.apply_command(1.0, 0.1)
+            moving = MovedAgents([agent])
             t0 = time.perf_counter()
             n = 0
             for _ in range(frames):
                 for _ in range(48):
                     pb.stepSimulation(physicsClientId=client.id)
+                moved = moving.boxes()
                 for r in layered:
-                    r.render(agent.aabbs())
+                    r.render(moved)
                     n += 1
             entry["layered_ms"] = (time.perf_counter() - t0) / n * 1e3
         client.disconnect()

@@ -138,6 +138,7 @@ class CameraSetConfig:
 
     name: str = "gpss"
     ids: list[int] = MISSING
+    count: int = 0  # use only the first `count` of ids (0: all); sweeps take subsets with it
     rate_hz: float = 5.0
     width: int = 960
     height: int = 540
@@ -160,6 +161,15 @@ class CameraSetConfig:
             )
         if len(set(self.ids)) != len(self.ids):
             raise _bad("cameras.ids", list(self.ids), "an id appears twice", "list each camera once")
+        if not 0 <= self.count <= len(self.ids):
+            raise _bad(
+                "cameras.count",
+                self.count,
+                f"must be within 0..{len(self.ids)} (the number of cameras.ids; 0 = all)",
+                f"use e.g. cameras.count={min(4, len(self.ids))}",
+            )
+        if self.count:
+            self.ids = list(self.ids[: self.count])
         _positive("cameras.rate_hz", self.rate_hz, "use e.g. cameras.rate_hz=5")
         if not (16 <= self.width <= 7680 and 16 <= self.height <= 4320):
             raise _bad(

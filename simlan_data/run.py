@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
+import cv2
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
@@ -98,6 +101,7 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
     finally:
         bar.close()
     metrics = stats.metrics()
+    metrics["job.opencv_threads"] = float(cv2.getNumThreads())
     if cfg.recording.enabled:
         with RecordingReader(bag) as reader:
             ctx = ReplayContext(reader, run_dir)
@@ -142,10 +146,45 @@ def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_d
     print("\n".join(lines), flush=True)
 
 
+def job_cpu_share(hydra_cfg: Any, cpu_count: int | None = None) -> int:
+    """Cores one job may use when a parallel launcher runs several at once (0: no limit).
+
+    joblib runs ``n_jobs`` jobs at a time on this machine (-1: one per core); Ray gives every
+    job ``hydra.launcher.ray.remote.num_cpus`` cores (1 unless set).
+    """
+    cores = cpu_count or os.cpu_count() or 1
+    if hydra_cfg.mode != RunMode.MULTIRUN:
+        return 0
+    launcher = hydra_cfg.launcher
+    target = str(launcher.get("_target_", ""))
+    if "joblib" in target:
+        n_jobs = int(launcher.get("n_jobs") or -1)
+        parallel = n_jobs if n_jobs > 0 else max(1, cores + 1 + n_jobs)
+        return max(1, cores // min(parallel, cores))
+    if "ray" in target:
+        remote = OmegaConf.select(launcher, "ray.remote") or {}
+        return max(1, int(remote.get("num_cpus", 1) or 1))
+    return 0
+
+
+def limit_threads(cores: int) -> None:
+    """Keep one job's thread pools to its share of the cores (parallel jobs must not oversubscribe).
+
+    OpenCV's pool (remap, marker detection) spins while it waits: on shared cores that burns the
+    other job's time. Mesa's rasterizer already runs one thread (render.software_gl_threads) and
+    the encoder threads mostly wait; numpy's BLAS is limited by the launchers (joblib's loky,
+    Ray's OMP_NUM_THREADS).
+    """
+    if cores > 0:
+        cv2.setNumThreads(cores)
+
+
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def _app(cfg: DictConfig) -> Any:
     typed = to_config(cfg)
-    run_dir = Path(HydraConfig.get().runtime.output_dir)
+    hydra_cfg = HydraConfig.get()
+    run_dir = Path(hydra_cfg.runtime.output_dir)
+    limit_threads(job_cpu_share(hydra_cfg))
     config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
     metrics = execute(typed, run_dir, config_yaml=config_yaml, progress=typed.progress)
     return metrics.get("sim.rtf")

@@ -36,6 +36,8 @@ def _one_error_line(stderr: str) -> str:
         (["agents.robot_agent_1.pose=[-13.0,4.0,0.0]"], "footprint overlaps"),
         (["agents.robot_agent_1.pose=[100.0,0.0,0.0]"], "footprint leaves the building"),
         (["cameras.rate_hz=7"], "invalid cameras.rate_hz=7.0"),
+        (["cameras.count=12"], "invalid cameras.count=12 in config: must be within 0..11"),
+        (["streams=rgbx"], "options: rgb, rgbds, rgbds_full"),
         # spawn lists
         (
             ["agents=four_robots", "agents.robot_agent_3.marker_id=1"],

@@ -10,7 +10,8 @@ import pytest
 
 from simlan_data._pybullet import pb
 from simlan_data.geometry.calibration import load_calibration
-from simlan_data.sim.agents import AGENT_TYPES, DiffDriveAgent
+from simlan_data.sim.agents import AGENT_TYPES, spawn_agent
+from simlan_data.sim.dynamic_layer import MovedAgents, StaticMeshes
 from simlan_data.sim.pybullet_client import connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable, merge_rects
 from simlan_data.world.builder import build_world, create_body
@@ -105,7 +106,18 @@ def test_depth_is_metric_z_depth() -> None:
         client.disconnect()
 
 
-def test_layered_render_equals_full_render_with_a_moving_agent() -> None:
+def _equal_fractions(a, b, valid: np.ndarray) -> tuple[float, float, float]:
+    """Share of pixels with equal labels, depth within 1 cm (valid pixels), equal colour."""
+    labels = float(np.mean(a.labels == b.labels))
+    depth = float(np.mean(np.abs(a.depth_m[valid] - b.depth_m[valid]) <= 0.01))
+    rgb = float(np.mean(np.all(a.rgb == b.rgb, axis=-1)))
+    return labels, depth, rgb
+
+
+def test_layered_render_equals_full_render_with_moving_agents() -> None:
+    """Four agents drive (one stops for a while, then goes on) under two cameras: the layered
+    renderer (static layer + region renders without the warehouse meshes, composited by depth,
+    only moved agents redrawn) matches the plain full render of the whole scene at every frame."""
     client = connect("egl")
     try:
         with tempfile.TemporaryDirectory() as tmp:
@@ -115,27 +127,78 @@ def test_layered_render_equals_full_render_with_a_moving_agent() -> None:
         labels = LabelTable()
         for body, label in world.labels.items():
             labels.set(body, label)
-        cam = load_calibration("162").camera.scaled(960, 540)
-        layered = CameraRenderer(client, cam, labels, distort=True, layered=True)
-        full = CameraRenderer(client, cam, labels, distort=True, layered=False)
-        layered.render_static()
-        agent = DiffDriveAgent(
-            client.id, "robot_agent_3", AGENT_TYPES["pallet_truck"], pose=[-8.0, 0.4, 0.0], marker_id=3
-        )
-        labels.set(agent.body, agent.label)
-        agent.apply_command(1.2, 0.3)
+        cams = [load_calibration(c).camera.scaled(960, 540) for c in ("162", "163")]
+        layered = [CameraRenderer(client, c, labels, distort=True, layered=True) for c in cams]
+        full = [CameraRenderer(client, c, labels, distort=True, layered=False) for c in cams]
+        for r in layered:
+            r.render_static()
+        centre, _ = cams[0].intersect_plane_z([[480.0, 270.0]], 0.0)
+        x0, y0 = float(centre[0, 0]), float(centre[0, 1])
+        specs = [  # type, pose, command (v, w)
+            ("pallet_truck", [x0 - 3.0, y0 + 1.2, 0.0], (1.2, 0.3)),
+            ("forklift", [x0 + 3.0, y0 - 1.0, np.pi], (0.9, -0.2)),
+            ("jackal", [x0, y0 - 2.5, 0.8], (0.6, 0.5)),
+            ("pallet_truck", [x0 + 1.0, y0 + 2.8, -0.5], (0.8, 0.0)),
+        ]
+        agents = []
+        for n, (kind, pose, cmd) in enumerate(specs, start=1):
+            agent = spawn_agent(client.id, f"robot_agent_{n}", AGENT_TYPES[kind], pose=pose, marker_id=n)
+            labels.set(agent.body, agent.label)
+            agent.apply_command(*cmd)
+            agents.append(agent)
+        meshes = StaticMeshes(client.id, world, labels)
+        meshes.remove()
+        moving = MovedAgents(agents)
         seen = 0
-        for _ in range(8):
+        for frame in range(8):
+            if frame == 3:
+                agents[0].apply_command(0.0, 0.0)  # stops: its region is no longer redrawn
+            if frame == 6:
+                agents[0].apply_command(1.0, -0.4)  # and drives on: no ghost where it stood
             for _ in range(48):
                 pb.stepSimulation(physicsClientId=client.id)
-            a = layered.render(agent.aabbs())
-            b = full.render()
-            seen += int((b.labels == agent.label).sum() > 100)
-            assert np.mean(a.labels == b.labels) >= 0.995
-            valid = layered.valid_mask
-            assert np.mean(np.abs(a.depth_m[valid] - b.depth_m[valid]) <= 0.01) >= 0.995
-            assert np.mean(np.all(a.rgb == b.rgb, axis=-1)) >= 0.99
-        assert seen >= 6, "the agent should be in view while the renders are compared"
+            moved = moving.boxes()
+            for lr, fr in zip(layered, full):
+                a = lr.render(moved)
+                with meshes.shown():
+                    b = fr.render()
+                seen += sum(int((b.labels == ag.label).sum() > 100) for ag in agents)
+                same_labels, same_depth, same_rgb = _equal_fractions(a, b, lr.valid_mask)
+                assert same_labels >= 0.995, (frame, lr.camera.camera_id, same_labels)
+                assert same_depth >= 0.995, (frame, lr.camera.camera_id, same_depth)
+                assert same_rgb >= 0.99, (frame, lr.camera.camera_id, same_rgb)
+        assert seen >= 30, f"agents should be in view while the renders are compared ({seen})"
+    finally:
+        client.disconnect()
+
+
+def test_layered_renderer_skips_what_did_not_move_and_streams_not_asked_for() -> None:
+    client, cam, labels, _ = _scene("egl")
+    try:
+        layered = CameraRenderer(client, cam, labels, layered=True, streams=["rgb"])
+        layered.render_static()
+        centre, _ = cam.intersect_plane_z([[480.0, 270.0]], 0.0)
+        agent = spawn_agent(
+            client.id,
+            "robot_agent_1",
+            AGENT_TYPES["jackal"],
+            pose=[float(centre[0, 0]), float(centre[0, 1]), 0.0],
+            marker_id=1,
+        )
+        labels.set(agent.body, agent.label)
+        moving = MovedAgents([agent])
+        first = layered.render(moving.boxes())
+        assert first.depth_m is None and first.labels is None and first.rgb is not None
+        for _ in range(10):  # settles on its wheels
+            pb.stepSimulation(physicsClientId=client.id)
+        layered.render(moving.boxes())
+        calls = layered.regions_rendered
+        for _ in range(3):
+            pb.stepSimulation(physicsClientId=client.id)
+            again = layered.render(moving.boxes())
+        assert moving.boxes() == []
+        assert not again.changed
+        assert layered.regions_rendered == calls  # nothing drawn again
     finally:
         client.disconnect()
 
@@ -151,3 +214,40 @@ def test_merge_rects() -> None:
         (0, 0, 10, 10),
         (200, 200, 210, 210),
     ]
+
+
+def test_static_layer_follows_a_pushed_object_and_the_meshes_go_away_again() -> None:
+    """A world object moved (a robot pushed it): the cameras that see it render their static layer
+    again with the warehouse meshes back for that moment, then the meshes are removed again; the
+    layered image still equals the full render."""
+    from conftest import compose_config
+    from simlan_data.run import to_config
+    from simlan_data.sim.scene import Scene, load_inputs
+
+    cfg = to_config(compose_config("cameras=single", "world.settle_s=0.5", "progress=false"))
+    scene = Scene.build(cfg, load_inputs(cfg))
+    try:
+        (renderer,) = scene.renderers
+        assert scene.meshes is not None and not scene.meshes.present
+        cam, cid = renderer.camera, scene.client.id
+        assert scene.world.movable, "the default warehouse has movable boxes and pallets"
+        body = sorted(scene.world.movable)[0]
+        assert renderer._static is not None and renderer._static[2] is not None
+        before = renderer._static[2].copy()
+        pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+        centre, _ = cam.intersect_plane_z([[300.0, 200.0]], 0.0)  # beside the truck's aisle
+        pb.resetBasePositionAndOrientation(
+            body, [float(centre[0, 0]), float(centre[0, 1]), pos[2]], orn, physicsClientId=cid
+        )
+        assert scene.refresh_static_layers() == 1
+        assert (renderer._static[2] != before).sum() > 50  # the object shows at its new place
+        assert not scene.meshes.present
+        layered = renderer.render(scene.moved_boxes())
+        full = CameraRenderer(scene.client, cam, scene.labels, layered=False)
+        with scene.meshes.shown():
+            reference = full.render()
+        same_labels, same_depth, same_rgb = _equal_fractions(layered, reference, renderer.valid_mask)
+        assert same_labels >= 0.995 and same_depth >= 0.995 and same_rgb >= 0.99
+        assert not scene.meshes.present
+    finally:
+        scene.close()

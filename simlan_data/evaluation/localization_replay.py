@@ -8,7 +8,9 @@ the same algorithm and parameters it reproduces the live estimates exactly; with
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -112,21 +114,31 @@ def replay_localizer(
     pending_t: int | None = None
 
     def flush_frame_set() -> None:
+        # the planned images of a frame set are decoded and searched on worker threads at once
+        # (Localizer.detect is a pure function; OpenCV releases the GIL); what they found is
+        # taken in camera order, exactly as the live run and process_image do
         if pending_t is None:
             return
         control_until(pending_t, inclusive=False)
-        for cid in camera_order:
-            if cid in pending and localizer.search_plan(pending_t, cid):
-                localizer.process_image(pending_t, cid, jpeg=pending[cid])
+        planned = [(cid, localizer.search_plan(pending_t, cid)) for cid in camera_order if cid in pending]
+        jobs = [
+            (cid, plan, pool.submit(localizer.detect, cid, plan, jpeg=pending[cid]))
+            for cid, plan in planned
+            if plan
+        ]
+        for cid, plan, job in jobs:
+            detections, seconds = job.result()
+            localizer.observe(pending_t, cid, plan, detections, seconds)
         localizer.close_frame(pending_t)
         control_until(pending_t, inclusive=True)
 
-    for m in reader.messages(topics):
-        if m.stamp_ns != pending_t:
-            flush_frame_set()
-            pending, pending_t = {}, m.stamp_ns
-        pending[m.topic.split("/")[1].removeprefix("camera_")] = bytes(m.msg.data)
-    flush_frame_set()
+    with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1), thread_name_prefix="search") as pool:
+        for m in reader.messages(topics):
+            if m.stamp_ns != pending_t:
+                flush_frame_set()
+                pending, pending_t = {}, m.stamp_ns
+            pending[m.topic.split("/")[1].removeprefix("camera_")] = bytes(m.msg.data)
+        flush_frame_set()
     control_until(duration_ns, inclusive=True)
     return localizer, {ns: status_table(est, status) for ns, (est, status) in rows.items()}
 

@@ -21,12 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import polars as pl
+from numpy.typing import NDArray
 
 from ..agent_types import MARKER_SIZE_M, AgentType
 from ..constants import NS_PER_S
 from ..geometry.camera import CameraModel
 from ..geometry.rotations import wrap_angle
-from ..geometry.transforms import Transform
 from ..gpss.markers import marker_corners_in_marker_frame
 from ..recording import schema
 from ..recording.reader import RecordingReader
@@ -90,26 +90,46 @@ class Visibility:
     kind: AgentType
 
     def in_view(self, x: float, y: float, yaw: float) -> bool:
+        return bool(self.in_view_many(np.array([[x, y, yaw]]))[0])
+
+    def in_view_many(self, poses_xyyaw: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """For base_link poses (N, 3): is the whole marker inside some camera's image, with a
+        valid ray at every corner and at least MIN_SIDE_PX across? (One projection per camera
+        for all poses.)"""
         assert self.kind.marker_xyz is not None
         mx, my, mz = self.kind.marker_xyz
-        marker = Transform.from_pose2d(x, y, yaw) @ Transform.from_pose2d(mx, my, 0.0, mz)
-        corners = marker.apply(marker_corners_in_marker_frame(MARKER_SIZE_M))
+        poses = np.asarray(poses_xyyaw, dtype=float).reshape(-1, 3)
+        n = len(poses)
+        c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+        local = marker_corners_in_marker_frame(MARKER_SIZE_M) + [mx, my, mz]  # in base_link
+        corners = np.stack(
+            [
+                poses[:, :1] + c * local[:, 0] - s * local[:, 1],
+                poses[:, 1:2] + s * local[:, 0] + c * local[:, 1],
+                np.broadcast_to(local[:, 2], (n, 4)),
+            ],
+            axis=-1,
+        )  # (N, 4, 3)
+        visible = np.zeros(n, dtype=bool)
         for cam in self.cameras.values():
-            if cam.position[2] <= mz:
+            if cam.position[2] <= mz or visible.all():
                 continue
-            uv, ok = cam.project(corners)
-            if (
-                not ok.all()
-                or (uv < 0).any()
-                or (uv[:, 0] > cam.width - 1).any()
-                or (uv[:, 1] > cam.height - 1).any()
-            ):
+            uv, ok = cam.project(corners.reshape(-1, 3))
+            uv = uv.reshape(n, 4, 2)
+            inside = (
+                ok.reshape(n, 4).all(axis=1)
+                & (uv >= 0).all(axis=(1, 2))
+                & (uv[..., 0] <= cam.width - 1).all(axis=1)
+                & (uv[..., 1] <= cam.height - 1).all(axis=1)
+                & ~visible
+            )
+            if not inside.any():
                 continue
-            _, ok_px = cam.undistort_pixels(uv)
-            side = float(np.mean(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1)))
-            if ok_px.all() and side >= MIN_SIDE_PX:
-                return True
-        return False
+            rows = np.flatnonzero(inside)
+            _, ok_px = cam.undistort_pixels(uv[rows].reshape(-1, 2))
+            side = np.linalg.norm(uv[rows] - np.roll(uv[rows], 1, axis=1), axis=2).mean(axis=1)
+            visible[rows] = ok_px.reshape(-1, 4).all(axis=1) & (side >= MIN_SIDE_PX)
+        return visible
 
 
 def localization_metrics(
@@ -126,10 +146,7 @@ def localization_metrics(
         err = np.hypot((valid["x"] - valid["gx"]).to_numpy(), (valid["y"] - valid["gy"]).to_numpy())
         yaw_err = np.degrees(np.abs(wrap_angle((valid["yaw"] - valid["gyaw"]).to_numpy())))
         vis = visibility[ns]
-        in_view = np.array(
-            [vis.in_view(gx, gy, gyaw) for gx, gy, gyaw in table.select("gx", "gy", "gyaw").iter_rows()],
-            dtype=bool,
-        )
+        in_view = vis.in_view_many(table.select("gx", "gy", "gyaw").to_numpy())
         observed = table["observed"].to_numpy()
         avail = observed[in_view] if in_view.any() else np.array([])
         ages = valid["age_s"].to_numpy()

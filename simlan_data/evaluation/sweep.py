@@ -119,6 +119,8 @@ def write_sweep_table(table: pl.DataFrame, sweep_dir: Path) -> tuple[Path, Path]
 def aggregate(sweep_dir: str | Path, report: str = "") -> pl.DataFrame:
     """Collect, write the table and run the named report; returns the table."""
     root = Path(sweep_dir)
+    from . import sweep_reports  # noqa: F401 - registers the packaged reports (imports this module)
+
     if report and report not in SWEEP_REPORTS:
         raise ConfigError(
             f"unknown sweep report {report!r}",

@@ -133,9 +133,7 @@ class CameraModel:
         xd = (uv[:, 0] - cx - skew * yd) / fx
         target = np.stack([xd, yd], axis=1)
         k1, k2, p1, p2, k3 = (float(c) for c in self.D[:5])
-        r_max = min(self.valid_radius, 10.0)
-        r_tab = np.linspace(0.0, r_max, 4097)
-        rd_tab = r_tab * (1.0 + k1 * r_tab**2 + k2 * r_tab**4 + k3 * r_tab**6)
+        r_tab, rd_tab = self._radial_table
         rd = np.hypot(xd, yd)
         candidate = rd <= rd_tab[-1]
         r0 = np.interp(rd[candidate], rd_tab, r_tab)
@@ -170,6 +168,13 @@ class CameraModel:
         residual_px = np.hypot(*((self._distort_numpy(xy) - target) * [fx, fy]).T)
         ok = finite & candidate & (np.hypot(xy[:, 0], xy[:, 1]) <= self.valid_radius) & (residual_px < 1e-3)
         return xy, ok
+
+    @cached_property
+    def _radial_table(self) -> tuple[FloatArray, FloatArray]:
+        """Undistorted radius -> distorted radius on the monotonic branch (Newton's start)."""
+        k1, k2, _, _, k3 = (float(c) for c in self.D[:5])
+        r_tab = np.linspace(0.0, min(self.valid_radius, 10.0), 4097)
+        return r_tab, r_tab * (1.0 + k1 * r_tab**2 + k2 * r_tab**4 + k3 * r_tab**6)
 
     def _distort_numpy(self, xy: FloatArray) -> FloatArray:
         """Apply the distortion to normalized coordinates, in normalized units (no K)."""

@@ -15,10 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import shapely
 from numpy.typing import NDArray
-from shapely import affinity
-from shapely.geometry import Polygon, box
-from shapely.ops import unary_union
+from shapely.geometry import Polygon
 
 from ..constants import NS_PER_S
 
@@ -35,16 +34,30 @@ class Intent:
     yields: bool = True  # False for people and fixed robots: others must go around them
 
 
+def _footprint_rings(
+    poses_xyyaw: NDArray[np.float64], footprint_m: tuple[float, float, float, float], grow_m: float
+) -> NDArray[np.float64]:
+    """Closed corner rings (N, 5, 2) of the footprint at N poses (x, y, yaw), in the map frame."""
+    x0, x1, y0, y1 = footprint_m
+    g = grow_m
+    # shapely's box(x0, y0, x1, y1) ring order, counter-clockwise
+    local = np.array(
+        [[x1 + g, y0 - g], [x1 + g, y1 + g], [x0 - g, y1 + g], [x0 - g, y0 - g], [x1 + g, y0 - g]]
+    )
+    c, s = np.cos(poses_xyyaw[:, 2])[:, None], np.sin(poses_xyyaw[:, 2])[:, None]
+    x = c * local[:, 0] - s * local[:, 1] + poses_xyyaw[:, :1]
+    y = s * local[:, 0] + c * local[:, 1] + poses_xyyaw[:, 1:2]
+    return np.stack([x, y], axis=-1)
+
+
 def footprint_polygon(
     pose_xyyaw: tuple[float, float, float],
     footprint_m: tuple[float, float, float, float],
     *,
     grow_m: float = 0.0,
 ) -> Polygon:
-    x, y, yaw = pose_xyyaw
-    x0, x1, y0, y1 = footprint_m
-    rect = box(x0 - grow_m, y0 - grow_m, x1 + grow_m, y1 + grow_m)
-    return affinity.translate(affinity.rotate(rect, yaw, origin=(0, 0), use_radians=True), x, y)
+    ring = _footprint_rings(np.array([pose_xyyaw], dtype=float), footprint_m, grow_m)[0]
+    return shapely.polygons(ring)
 
 
 def swept_claim(
@@ -54,27 +67,28 @@ def swept_claim(
 
     The heading at a pose is that of the path's chord over ``heading_window_m`` around it: a
     path follower cuts the small zigzags of a grid path, so the robot does not turn on each.
+    (Vectorized: the footprints are built as one array and merged by one ``union_all``.)
     """
-    shapes = [footprint_polygon(intent.pose_xyyaw, intent.footprint_m, grow_m=grow_m)]
+    poses = [np.asarray(intent.pose_xyyaw, dtype=float)[None, :]]
     path = intent.path_ahead_xy
     if path is not None and len(path) >= 2:
         lengths = np.linalg.norm(np.diff(path, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(lengths)])
         if cum[-1] < 1e-9:
-            return shapes[0]
+            return footprint_polygon(intent.pose_xyyaw, intent.footprint_m, grow_m=grow_m)
 
-        def at(s: float) -> NDArray[np.float64]:
-            return np.array([np.interp(s, cum, path[:, 0]), np.interp(s, cum, path[:, 1])])
+        def at(s: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.stack([np.interp(s, cum, path[:, 0]), np.interp(s, cum, path[:, 1])], axis=-1)
 
         half = 0.5 * heading_window_m
-        for s in np.arange(step_m, min(horizon_m, cum[-1]) + 1e-9, step_m):
-            p = at(s)
-            d = at(min(s + half, cum[-1])) - at(max(s - half, 0.0))
-            yaw = float(np.arctan2(d[1], d[0]))
-            shapes.append(
-                footprint_polygon((float(p[0]), float(p[1]), yaw), intent.footprint_m, grow_m=grow_m)
-            )
-    return unary_union(shapes)
+        s = np.arange(step_m, min(horizon_m, cum[-1]) + 1e-9, step_m)
+        if len(s):
+            d = at(np.minimum(s + half, cum[-1])) - at(np.maximum(s - half, 0.0))
+            poses.append(np.column_stack([at(s), np.arctan2(d[:, 1], d[:, 0])]))
+    rings = _footprint_rings(np.concatenate(poses), intent.footprint_m, grow_m)
+    if len(rings) == 1:
+        return shapely.polygons(rings[0])
+    return shapely.union_all(shapely.polygons(rings))
 
 
 @dataclass

@@ -164,6 +164,15 @@ class PathFollower:
         t = 0.0 if L < 1e-9 else (s - self._cum[i]) / L
         return self.path[i] + t * (self.path[i + 1] - self.path[i])
 
+    def points_at(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`point_at` for an array of arc lengths (N,) -> (N, 2), the same numbers."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length_m)
+        i = np.clip(np.searchsorted(self._cum, s, side="right") - 1, 0, len(self._seg_len) - 1)
+        L = self._seg_len[i]
+        safe = np.where(L < 1e-9, 1.0, L)
+        t = np.where(L < 1e-9, 0.0, (s - self._cum[i]) / safe)
+        return self.path[i] + t[:, None] * (self.path[i + 1] - self.path[i])
+
     def remaining_m(self) -> float:
         return self.length_m - self._progress_m
 

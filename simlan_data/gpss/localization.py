@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -220,6 +221,8 @@ class Localizer:
             for m in self.mounts
         }
         self._detector = MarkerDetector()
+        self._local = threading.local()  # a detector per worker thread (see detect)
+        self._prediction_cache: dict[tuple[str, int], tuple] = {}
         self._frame_obs: list[MarkerObservation] = []
         self._pending: deque[tuple[int, PoseFix]] = deque()  # (usable from, fix)
         self._full_cache: dict[tuple[str, bytes], list[Detection]] = {}
@@ -259,14 +262,16 @@ class Localizer:
         for tr in self._tracks.values():
             if not self._tracked(tr, t_ns):
                 continue
-            x, P = tr.ekf.at(t_ns)
+            _, P, marker, corners = self._predicted_marker(tr, t_ns)
             m = tr.mount
-            base = Transform.from_pose2d(float(x[0]), float(x[1]), float(x[2]))
-            marker = base @ Transform.from_pose2d(m.offset_xy_m[0], m.offset_xy_m[1], 0.0, m.height_m)
-            corners = marker.apply(marker_corners_in_marker_frame(m.size_m))
-            uv, ok = cam.project(corners)
-            if not ok.all():
+            # (cam.project, with the cheap validity test first: most cameras do not see the marker)
+            pc = cam.world_to_camera(corners)
+            if not (pc[:, 2] > 1e-9).all():
                 continue
+            xy = pc[:, :2] / pc[:, 2:3]
+            if not (np.hypot(xy[:, 0], xy[:, 1]) <= cam.valid_radius).all():
+                continue
+            uv = cam.distort_normalized(xy)
             rng = float(np.linalg.norm(marker.translation - cam.position))
             sigma_m = float(np.sqrt(max(P[0, 0], P[1, 1]))) + 0.5 * m.size_m * float(np.sqrt(P[2, 2]))
             margin = self.params.roi_margin_px + 3.0 * sigma_m * cam.K[0, 0] / max(rng, 1e-3)
@@ -277,6 +282,22 @@ class Localizer:
                 rois.append((int(u0), int(v0), int(u1), int(v1)))
         return rois
 
+    def _predicted_marker(
+        self, track: _Track, t_ns: int
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], Transform, NDArray[np.float64]]:
+        """EKF state and covariance at ``t_ns``, the marker's pose and corners (map); memoized for
+        the cameras of one tick (cleared whenever the filter changes)."""
+        key = (track.mount.namespace, t_ns)
+        hit = self._prediction_cache.get(key)
+        if hit is None:
+            x, P = track.ekf.at(t_ns)
+            m = track.mount
+            base = Transform.from_pose2d(float(x[0]), float(x[1]), float(x[2]))
+            marker = base @ Transform.from_pose2d(m.offset_xy_m[0], m.offset_xy_m[1], 0.0, m.height_m)
+            hit = (x, P, marker, marker.apply(marker_corners_in_marker_frame(m.size_m)))
+            self._prediction_cache[key] = hit
+        return hit
+
     def process_image(
         self, t_ns: int, camera_id: str, jpeg: bytes | None = None, gray: NDArray[np.uint8] | None = None
     ) -> list[Detection]:
@@ -284,29 +305,65 @@ class Localizer:
         plan = self.search_plan(t_ns, camera_id)
         if not plan:
             return []
+        detections, seconds = self.detect(camera_id, plan, jpeg=jpeg, gray=gray)
+        self.observe(t_ns, camera_id, plan, detections, seconds)
+        return detections
+
+    def detect(
+        self,
+        camera_id: str,
+        plan: str | list[Roi],
+        *,
+        jpeg: bytes | None = None,
+        gray: NDArray[np.uint8] | None = None,
+    ) -> tuple[list[Detection], float]:
+        """The image part of :meth:`process_image`: markers found as planned, and the seconds spent.
+
+        A pure function of the image and the plan, safe to run on worker threads (each thread
+        has its own detector; OpenCV releases the GIL) while the simulation renders on.
+        """
         t0 = time.perf_counter()
         key = (
             (camera_id, hashlib.blake2b(jpeg, digest_size=16).digest())
             if (plan == "full" and jpeg is not None)
             else None
         )
-        if key is not None and key in self._full_cache:
-            detections = self._full_cache[key]
+        cached = self._full_cache.get(key) if key is not None else None
+        if cached is not None:
+            return cached, time.perf_counter() - t0
+        if gray is None:
+            assert jpeg is not None
+            gray = cv2.imdecode(np.frombuffer(jpeg, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+        detector = self._thread_detector()
+        if plan == "full":
+            detections = detector.detect(camera_id, gray)
+            if key is not None:  # (a lost entry only costs a search again: the content is the same)
+                self._full_cache = {k: v for k, v in self._full_cache.items() if k[0] != camera_id}
+                self._full_cache[key] = detections
         else:
-            if gray is None:
-                assert jpeg is not None
-                gray = cv2.imdecode(np.frombuffer(jpeg, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
-            if plan == "full":
-                detections = self._detector.detect(camera_id, gray)
-                if key is not None:
-                    self._full_cache = {k: v for k, v in self._full_cache.items() if k[0] != camera_id}
-                    self._full_cache[key] = detections
-            else:
-                found: dict[int, Detection] = {}
-                for roi in plan:
-                    for d in self._detector.detect(camera_id, gray, roi):
-                        found.setdefault(d.marker_id, d)
-                detections = [found[k] for k in sorted(found)]
+            found: dict[int, Detection] = {}
+            for roi in plan:
+                for d in detector.detect(camera_id, gray, roi):
+                    found.setdefault(d.marker_id, d)
+            detections = [found[k] for k in sorted(found)]
+        return detections, time.perf_counter() - t0
+
+    def _thread_detector(self) -> MarkerDetector:
+        if threading.current_thread() is threading.main_thread():
+            return self._detector
+        detector: MarkerDetector | None = getattr(self._local, "detector", None)
+        if detector is None:
+            detector = self._local.detector = MarkerDetector()
+        return detector
+
+    def observe(
+        self, t_ns: int, camera_id: str, plan: str | list[Roi], detections: list[Detection], seconds: float
+    ) -> None:
+        """The state part of :meth:`process_image`: marker poses into this frame set's observations.
+
+        Call in camera order (fusion sums in that order), after :meth:`detect` with the same plan.
+        """
+        t0 = time.perf_counter()
         for det in detections:
             mount = self._by_marker.get(det.marker_id)
             if mount is None:
@@ -320,11 +377,10 @@ class Localizer:
                 camera_id,
                 t_ns,
                 "full" if plan == "full" else "roi",
-                time.perf_counter() - t0,
+                seconds + time.perf_counter() - t0,
                 len(detections),
             )
         )
-        return detections
 
     def close_frame(self, t_ns: int) -> list[PoseFix]:
         """Fuse the observations of this frame set into one fix per agent."""
@@ -355,6 +411,7 @@ class Localizer:
     # ----------------------------------------------------------------------------- filtering
     def estimate(self, t_ns: int) -> dict[str, PoseEstimate]:
         """Apply the fixes that are due, then every agent's pose at ``t_ns``."""
+        self._prediction_cache.clear()
         while self._pending and self._pending[0][0] <= t_ns:
             _, fix = self._pending.popleft()
             track = self._tracks[fix.namespace]
@@ -402,6 +459,7 @@ class Localizer:
         """Tell the filter the velocity command a robot got at ``t_ns`` (used between fixes)."""
         track = self._tracks.get(namespace)
         if track is not None:
+            self._prediction_cache.clear()
             track.ekf.command(t_ns, linear_mps, angular_rps)
 
     def track_stats(self) -> dict[str, tuple[int, int]]:

@@ -126,7 +126,7 @@ class Navigator:
             start = f.remaining_m()
             s0 = f.length_m - start
             samples = np.arange(s0, min(f.length_m, s0 + 4.0) + 1e-9, 0.25)
-            ahead = np.vstack([[pose_xyyaw[0], pose_xyyaw[1]], np.array([f.point_at(s) for s in samples])])
+            ahead = np.vstack([[pose_xyyaw[0], pose_xyyaw[1]], f.points_at(samples)])
         return Intent(self.namespace, priority, pose_xyyaw, footprint_m, ahead)
 
     def step(

@@ -126,6 +126,19 @@ class GpssStack:
         self.localizer.process_image(t_ns, camera_id, jpeg=jpeg, gray=gray)
         return "full" if plan == "full" else "roi"
 
+    def search_plan(self, t_ns: int, camera_id: str) -> str | list | None:
+        """Where the localizer will search this camera's image at ``t_ns`` (None: it will not)."""
+        if self.source != "camera":
+            return None
+        return self.localizer.search_plan(t_ns, camera_id) or None
+
+    def camera_detections(
+        self, t_ns: int, camera_id: str, plan: str | list, detections: list, seconds: float
+    ) -> str:
+        """Take what :meth:`Localizer.detect` found in a planned image (in camera order)."""
+        self.localizer.observe(t_ns, camera_id, plan, detections, seconds)
+        return "full" if plan == "full" else "roi"
+
     def close_camera_tick(self, t_ns: int) -> None:
         if self.source == "camera":
             self.localizer.close_frame(t_ns)

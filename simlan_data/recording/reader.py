@@ -19,6 +19,13 @@ from ..errors import RecordingInputError
 from . import schema
 
 METADATA_KEY_FORMAT = "simlan.format_version"
+# Every read of a topic decompresses and walks all chunks that hold it, and images share every
+# chunk with the small topics: metrics reading ground truth, commands and estimates topic by
+# topic made a replay read the whole bag twenty times. The first read of a small topic therefore
+# reads all small topics at once and keeps their raw bytes, up to this many messages (about 15
+# minutes of the four-robot scenario); images are always streamed.
+STREAMED_TYPES = frozenset({"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"})
+SMALL_TOPICS_CACHE_MAX_MESSAGES = 500_000
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,7 @@ class RecordingReader:
                 p, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else 'unreadable'}"
             ) from err
         self._metadata = _read_metadata(p)
+        self._small: list[tuple[Any, int, bytes]] | None = None  # see STREAMED_TYPES
         self._register_bag_types()
         self.format_version = self.custom_data.get(METADATA_KEY_FORMAT, "")
         if check_format:
@@ -179,7 +187,7 @@ class RecordingReader:
         if not conns:
             return
         try:
-            for conn, stamp, data in self._reader.messages(connections=conns, start=start_ns, stop=stop_ns):
+            for conn, stamp, data in self._raw_messages(conns, start_ns, stop_ns):
                 if raw:
                     yield Message(conn.topic, int(stamp), conn.msgtype, data)
                     continue
@@ -201,9 +209,45 @@ class RecordingReader:
                 f"{type(err).__name__} while reading messages: {str(err).splitlines()[0] if str(err) else ''}",
             ) from err
 
+    def _raw_messages(
+        self, conns: list[Any], start_ns: int | None, stop_ns: int | None, *, cache: bool = True
+    ) -> Iterator[tuple[Any, int, bytes]]:
+        """(connection, log time, CDR bytes) in log-time order; small topics from the cache."""
+        small = [c for c in self._reader.connections if c.msgtype not in STREAMED_TYPES]
+        cacheable = (
+            all(c.msgtype not in STREAMED_TYPES for c in conns)
+            and sum(c.msgcount for c in small) <= SMALL_TOPICS_CACHE_MAX_MESSAGES
+        )
+        if not cacheable or (self._small is None and not cache):
+            yield from self._reader.messages(connections=conns, start=start_ns, stop=stop_ns)
+            return
+        if self._small is None:
+            # one pass for every small topic; a subset of this time order is what reading that
+            # subset alone gives (the same merge of the same chunks)
+            self._small = list(self._reader.messages(connections=small))
+        ids = {c.id for c in conns}
+        lo = -(2**63) if start_ns is None else start_ns
+        hi = 2**63 if stop_ns is None else stop_ns
+        for conn, stamp, data in self._small:
+            if conn.id in ids and lo <= stamp < hi:
+                yield conn, stamp, data
+
     def first(self, topic: str) -> Message | None:
-        for m in self.messages([topic]):
-            return m
+        """The first message of ``topic`` (reads only what it needs unless small topics are cached)."""
+        conns = [c for c in self._reader.connections if c.topic == topic]
+        if not conns:
+            return None
+        for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
+            try:
+                msg = self._store.deserialize_cdr(data, conn.msgtype)
+            except Exception as err:
+                raise RecordingInputError(
+                    "message undecodable",
+                    f"{self.path} topic {conn.topic} at {stamp} ns",
+                    f"{type(err).__name__}: {err}",
+                    "the recording is corrupt; try --recover",
+                ) from err
+            return Message(conn.topic, int(stamp), conn.msgtype, msg)
         return None
 
     # ----------------------------------------------------------------------------- summary

@@ -3,12 +3,20 @@
 Most cameras see no motion most of the time: their images are identical frame after frame. The
 first time an image version is recorded it is encoded and serialized on a worker thread; while it
 stays unchanged, later frames reuse those CDR bytes with a new header stamp (as do camera infos).
+
+With ``decode_gray`` the worker that JPEG-encodes a colour image also decodes it to grey, which
+is what the localizer searches (it sees what the bag holds): the simulation thread only waits
+for the result instead of decoding every searched image itself (about 1.5 ms each).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
 
 from ..config import RecordingConfig
 from ..geometry.camera import CameraModel
@@ -17,6 +25,14 @@ from ..recording import schema
 from ..recording.codecs import encode_depth, encode_labels, encode_rgb
 from ..recording.writer import RecordingWriter
 from .rendering import CameraImages
+
+
+class EncodedRgb(NamedTuple):
+    """A compressed colour image, and its grey decoding if it was asked for."""
+
+    format: str
+    data: bytes
+    gray: NDArray[np.uint8] | None = None
 
 
 class _Restamped:
@@ -45,8 +61,10 @@ class CameraRecorder:
         *,
         depth_every: int,
         semantic_every: int,
+        decode_gray: bool = False,
     ) -> None:
         self.writer, self.rec = writer, rec
+        self.decode_gray = decode_gray
         self.depth_every, self.semantic_every = depth_every, semantic_every
         self._streams = streams
         self._topics: dict[str, dict[str, schema.Topic]] = {}
@@ -66,20 +84,30 @@ class CameraRecorder:
             )
         return self._topics[camera_id]
 
-    def _encoder(self, stream: str) -> Callable[[Any], tuple[str, bytes]] | None:
+    def _encoder(self, stream: str) -> Callable[[Any], tuple[Any, ...]] | None:
         rec = self.rec
         if stream == "rgb":
-            return (
-                None
-                if rec.rgb_encoding == "raw"
-                else (lambda a: encode_rgb(a, rec.rgb_encoding, jpeg_quality=rec.jpeg_quality))
-            )
+            if rec.rgb_encoding == "raw":
+                return None
+            decode = self.decode_gray
+
+            def rgb(a: Any) -> EncodedRgb:
+                fmt, data = encode_rgb(a, rec.rgb_encoding, jpeg_quality=rec.jpeg_quality)
+                gray = None
+                if decode:
+                    gray = np.asarray(
+                        cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE),
+                        dtype=np.uint8,
+                    )
+                return EncodedRgb(fmt, data, gray)
+
+            return rgb
         if stream == "depth":
             return None if rec.depth_encoding == "raw" else encode_depth
         return None if rec.semantic_encoding == "raw" else encode_labels
 
     def record(self, t: int, frame_index: int, camera: CameraModel, images: CameraImages) -> Any:
-        """Queue one camera frame; returns the future of the colour image's (format, bytes), or None."""
+        """Queue one camera frame; returns the future of the colour image's EncodedRgb, or None."""
         cid, frame = camera.camera_id, camera.frame_id
         topics = self.topics(cid)
         if cid not in self._info:
@@ -107,7 +135,7 @@ class CameraRecorder:
                 else:
                     encoded = self.writer.run_async(encode, array)
                     pending = self.writer.submit(
-                        topic, t, lambda e=encoded, t=t: M.compressed_image(t, frame, *e.result())
+                        topic, t, lambda e=encoded, t=t: M.compressed_image(t, frame, *e.result()[:2])
                     )
                 self.encoded += 1
                 self._cache[key] = (version, encoded, pending)

@@ -2,19 +2,25 @@
 
 Data flow per camera frame::
 
-    static layer (rendered once, movable bodies hidden)        movable bodies' AABBs
-          |                                                        | project to canvas
-          v                                                        v
-    ideal pinhole canvas  <-- restore last frame's regions --  regions of interest
-          |               <-- render full scene in each region (off-axis projection)
+    static layer (rendered once, agents absent):               boxes of bodies that moved
+    RGB, depth, labels                                             | project to canvas
+          |                                                        v
+          v                                                 regions of interest
+    ideal pinhole canvas  <-- restore the regions from the static layer
+          |               <-- dynamic layer: the client rendered in each region (off-axis
+          |                   projection), its nearer pixels composited over the static layer
           v
     cv2.remap with the camera's distortion maps --> distorted RGB / depth / labels (image size)
 
 The canvas is an ideal (undistorted) pinhole image with the camera's focal length, large enough
 to cover every valid ray of the distorted image. A region render uses the same projection
-shifted to the region, so it equals the full render pixel for pixel; cameras that see no movable
-body reuse their previous output. ``layered=False`` renders the whole canvas every frame (the
-baseline the layered path is measured and tested against).
+shifted to the region, so it equals the full render pixel for pixel. A dynamic pixel replaces
+the static one where it is nearer (or the static layer saw nothing there): with the warehouse's
+meshes still in the client the region shows the whole scene and composites to the same image;
+the simulation removes them once the static layers exist (``sim/dynamic_layer.py``), so region
+renders draw only what moves. Cameras that see no moved body reuse their previous output.
+``layered=False`` renders the whole canvas every frame (the baseline the layered path is measured
+and tested against).
 """
 
 from __future__ import annotations
@@ -32,12 +38,17 @@ from .pybullet_client import Client
 
 EGL_MAX_TILE = (1024, 768)  # PyBullet's EGL window size: larger requests are upsampled, so tile
 CANVAS_MARGIN_PX = 3
-RENDER_CALL_COST_PX = 40_000  # measured: a render call's fixed cost equals about this many pixels
+# measured (benchmarks/perf.py): a region render's fixed cost equals about this many pixels of
+# region; closer regions are cheaper rendered as one
+RENDER_CALL_COST_PX = 40_000
+STREAMS = ("rgb", "depth", "semantic")
 
 Rect = tuple[int, int, int, int]  # u0, v0, u1, v1 (exclusive), in canvas pixels
 # corner index = 4 * ix + 2 * iy + iz over (lo, hi) per axis; edges join corners differing in one bit
 _BOX_EDGES = [(i, i ^ bit) for i in range(8) for bit in (1, 2, 4) if i < i ^ bit]
+_CORNER_BITS = np.array([[(i >> 2) & 1, (i >> 1) & 1, i & 1] for i in range(8)])  # (8, 3): lo/hi per axis
 Aabb = tuple[Sequence[float], Sequence[float]]
+Layers = tuple[np.ndarray, np.ndarray, "np.ndarray | None"]  # rgb, depth (m, 0 = nothing), labels
 
 
 @dataclass
@@ -71,8 +82,8 @@ class LabelTable:
 def merge_rects(rects: list[Rect], *, slack_px: int = 0) -> list[Rect]:
     """Merge rectangles that overlap, or whose union costs at most ``slack_px`` extra pixels.
 
-    A render call has a fixed cost (about 40,000 pixels' worth here), so close regions are
-    cheaper rendered as one.
+    A render call has a fixed cost (see RENDER_CALL_COST_PX), so close regions are cheaper
+    rendered as one.
     """
 
     def area(r: Rect) -> int:
@@ -98,7 +109,12 @@ def merge_rects(rects: list[Rect], *, slack_px: int = 0) -> list[Rect]:
 
 
 class CameraRenderer:
-    """Render one calibrated camera from a PyBullet client."""
+    """Render one calibrated camera from a PyBullet client.
+
+    ``streams`` says which outputs are needed: without ``semantic`` no segmentation pass runs
+    (PyBullet's EGL renderer draws the scene twice for it) and ``labels`` is None; without
+    ``depth`` the output ``depth_m`` is None (depth is still rendered: layers composite by it).
+    """
 
     def __init__(
         self,
@@ -110,17 +126,15 @@ class CameraRenderer:
         near_m: float = 1.0,
         far_m: float = 100.0,
         layered: bool = True,
+        streams: Sequence[str] = STREAMS,
     ) -> None:
         self.client, self.camera, self.labels = client, camera, labels
         self.distort, self.near_m, self.far_m, self.layered = distort, near_m, far_m, layered
+        self.want_depth, self.want_labels = "depth" in streams, "semantic" in streams
         self._view = camera.opengl_view()
-        # TinyRenderer samples pixel centres half a pixel off OpenGL's convention (measured:
-        # +0.5 px in u, -0.5 px in v); shifting the principal point puts them back
-        self._tiny_shift = (0.5, -0.5) if client.backend == "tiny" else (0.0, 0.0)
         self._setup_canvas()
-        self._static: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._canvas: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-        self._dirty: list[Rect] = []
+        self._static: Layers | None = None
+        self._canvas: Layers | None = None
         self._last: CameraImages | None = None
         self.regions_rendered = 0
         self.pixels_rendered = 0
@@ -158,56 +172,68 @@ class CameraRenderer:
 
     def canvas_rects(self, aabbs: Sequence[Aabb]) -> list[Rect]:
         """Canvas regions covered by world AABBs (each box clipped at the near plane)."""
+        if len(aabbs) == 0:
+            return []
         width, height = self.canvas_size
-        rects: list[Rect] = []
-        K, cam_from_world = self.canvas_K, self.camera.camera_from_world
-        for lo, hi in aabbs:
-            corners = np.array(
-                [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-            )
-            pc = cam_from_world.apply(corners)
-            front = pc[:, 2] > self.near_m
-            if not front.any():
-                continue
-            pts = pc[front]
-            if not front.all():  # add where the box edges cross the near plane
-                crossings = []
-                for i, j in _BOX_EDGES:
-                    if front[i] != front[j]:
-                        s_ = (self.near_m - pc[i, 2]) / (pc[j, 2] - pc[i, 2])
-                        crossings.append(pc[i] + s_ * (pc[j] - pc[i]))
-                pts = np.vstack([pts, np.array(crossings)])
-            u = K[0, 0] * pts[:, 0] / pts[:, 2] + K[0, 1] * pts[:, 1] / pts[:, 2] + K[0, 2]
-            v = K[1, 1] * pts[:, 1] / pts[:, 2] + K[1, 2]
-            u0, v0 = max(0, int(np.floor(u.min())) - 1), max(0, int(np.floor(v.min())) - 1)
-            u1, v1 = min(width, int(np.ceil(u.max())) + 2), min(height, int(np.ceil(v.max())) + 2)
-            if u0 < u1 and v0 < v1:
-                rects.append((u0, v0, u1, v1))
+        cam_from_world = self.camera.camera_from_world
+        boxes = np.asarray(aabbs, dtype=float).reshape(-1, 2, 3)
+        corners = boxes[:, _CORNER_BITS, np.arange(3)]  # (N, 8, 3)
+        pc = corners @ cam_from_world.rotation.T + cam_from_world.translation
+        front = pc[..., 2] > self.near_m
+        whole = front.all(axis=1)
+        lo, hi = np.full((len(pc), 2), np.inf), np.full((len(pc), 2), -np.inf)
+        if whole.any():  # the usual case: boxes in front of the camera, vectorized
+            uv = self._project(pc[whole].reshape(-1, 3)).reshape(-1, 8, 2)
+            lo[whole], hi[whole] = uv.min(axis=1), uv.max(axis=1)
+        for i in np.flatnonzero(front.any(axis=1) & ~whole):  # add where edges cross the near plane
+            pts, fr = pc[i], front[i]
+            crossings = [
+                pts[a] + (self.near_m - pts[a, 2]) / (pts[b, 2] - pts[a, 2]) * (pts[b] - pts[a])
+                for a, b in _BOX_EDGES
+                if fr[a] != fr[b]
+            ]
+            uv = self._project(np.vstack([pts[fr], np.array(crossings)]))
+            lo[i], hi[i] = uv.min(axis=0), uv.max(axis=0)
+        seen = np.isfinite(lo[:, 0])
+        u0 = np.maximum(0, np.floor(lo[seen, 0]).astype(int) - 1)
+        v0 = np.maximum(0, np.floor(lo[seen, 1]).astype(int) - 1)
+        u1 = np.minimum(width, np.ceil(hi[seen, 0]).astype(int) + 2)
+        v1 = np.minimum(height, np.ceil(hi[seen, 1]).astype(int) + 2)
+        keep = (u0 < u1) & (v0 < v1)
+        rects = [
+            (int(a), int(b), int(c), int(d)) for a, b, c, d in zip(u0[keep], v0[keep], u1[keep], v1[keep])
+        ]
         return merge_rects(rects, slack_px=RENDER_CALL_COST_PX)
 
+    def _project(self, pc: np.ndarray) -> np.ndarray:
+        """Canvas pixels (N, 2) of camera-frame points (N, 3) in front of the camera."""
+        K = self.canvas_K
+        x, y = pc[:, 0] / pc[:, 2], pc[:, 1] / pc[:, 2]
+        return np.stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]], axis=1)
+
     # ----------------------------------------------------------------------------- rendering
-    def _render_rect(self, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Render the full scene in a canvas rectangle: RGB, metric depth, labels."""
+    def _render_rect(self, rect: Rect) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Render a canvas rectangle: RGB, metric depth (0 = nothing drawn), labels if wanted."""
+        client, want_labels = self.client, self.want_labels
         u0, v0, u1, v1 = rect
         rgb = np.empty((v1 - v0, u1 - u0, 3), dtype=np.uint8)
         depth = np.empty((v1 - v0, u1 - u0), dtype=np.float32)
-        labels = np.empty((v1 - v0, u1 - u0), dtype=np.uint8)
-        tw, th = EGL_MAX_TILE if self.client.backend == "egl" else (u1 - u0, v1 - v0)
+        out_labels = np.empty((v1 - v0, u1 - u0), dtype=np.uint8) if want_labels else None
+        tw, th = EGL_MAX_TILE if client.backend == "egl" else (u1 - u0, v1 - v0)
+        # TinyRenderer samples pixel centres half a pixel off OpenGL's convention (measured:
+        # +0.5 px in u, -0.5 px in v); shifting the principal point puts them back
+        shift = (0.5, -0.5) if client.backend == "tiny" else (0.0, 0.0)
         for tv in range(v0, v1, th):
             for tu in range(u0, u1, tw):
                 w, h = min(tw, u1 - tu), min(th, v1 - tv)
                 K = self.canvas_K.copy()
-                K[0, 2] -= tu + self._tiny_shift[0]
-                K[1, 2] -= tv + self._tiny_shift[1]
+                K[0, 2] -= tu + shift[0]
+                K[1, 2] -= tv + shift[1]
                 proj = opengl_projection(K, w, h, near_m=self.near_m, far_m=self.far_m)
-                if self.client.backend == "egl":
+                if client.backend == "egl":
+                    flags = pb.ER_USE_PROJECTIVE_TEXTURE | (0 if want_labels else pb.ER_NO_SEGMENTATION_MASK)
                     _, _, c, d, s = pb.getCameraImage(
-                        w,
-                        h,
-                        self._view,
-                        proj,
-                        flags=pb.ER_USE_PROJECTIVE_TEXTURE,
-                        physicsClientId=self.client.id,
+                        w, h, self._view, proj, flags=flags, physicsClientId=client.id
                     )
                 else:
                     _, _, c, d, s = pb.getCameraImage(
@@ -217,27 +243,41 @@ class CameraRenderer:
                         proj,
                         renderer=pb.ER_TINY_RENDERER,
                         shadow=0,
-                        physicsClientId=self.client.id,
+                        physicsClientId=client.id,
                     )
-                c, d, s = (np.asarray(x) for x in (c, d, s))
                 sl = (slice(tv - v0, tv - v0 + h), slice(tu - u0, tu - u0 + w))
-                rgb[sl] = c.reshape(h, w, 4)[..., :3]
-                depth[sl] = linearize_depth(d.reshape(h, w), near_m=self.near_m, far_m=self.far_m)
-                labels[sl] = self.labels.apply(s.reshape(h, w).astype(np.int32))
+                rgb[sl] = np.asarray(c).reshape(h, w, 4)[..., :3]
+                depth[sl] = linearize_depth(np.asarray(d).reshape(h, w), near_m=self.near_m, far_m=self.far_m)
+                if out_labels is not None:
+                    out_labels[sl] = self.labels.apply(np.asarray(s).reshape(h, w).astype(np.int32))
                 self.regions_rendered += 1
                 self.pixels_rendered += w * h
-        return rgb, depth, labels
+        return rgb, depth, out_labels
 
-    def _full_canvas(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _full_canvas(self) -> Layers:
         width, height = self.canvas_size
         return self._render_rect((0, 0, width, height))
 
     def render_static(self) -> None:
         """Render and keep the static layer (call while movable bodies are hidden)."""
         self._static = self._full_canvas()
-        self._canvas = tuple(a.copy() for a in self._static)  # type: ignore[assignment]
-        self._dirty = []
+        self._canvas = tuple(None if a is None else a.copy() for a in self._static)  # type: ignore[assignment]
         self._last = None
+
+    def _composite(self, rect: Rect) -> None:
+        """Canvas region = static layer, with the dynamic layer's nearer pixels over it."""
+        assert self._static is not None and self._canvas is not None
+        u0, v0, u1, v1 = rect
+        sl = (slice(v0, v1), slice(u0, u1))
+        rgb, depth, labels = self._canvas
+        s_rgb, s_depth, s_labels = self._static
+        d_rgb, d_depth, d_labels = self._render_rect(rect)
+        behind = s_depth[sl]
+        front = (d_depth > 0) & ((d_depth <= behind) | (behind == 0))
+        rgb[sl] = np.where(front[..., None], d_rgb, s_rgb[sl])
+        depth[sl] = np.where(front, d_depth, behind)
+        if labels is not None and s_labels is not None and d_labels is not None:
+            labels[sl] = np.where(front, d_labels, s_labels[sl])
 
     def _image_rect(self, rect: Rect) -> tuple[int, int, int, int]:
         """Bounding rectangle in the output image of the pixels that sample canvas ``rect``."""
@@ -268,72 +308,79 @@ class CameraRenderer:
         )
 
     def _distort(
-        self,
-        canvas: tuple[np.ndarray, np.ndarray, np.ndarray],
-        region: tuple[int, int, int, int] | None = None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Distorted images of the canvas (of one output region if given)."""
+        self, canvas: Layers, region: tuple[int, int, int, int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Distorted images of the canvas (of one output region if given); unwanted streams None."""
         rgb, depth, labels = canvas
+        want_depth, want_labels = self.want_depth, self.want_labels and labels is not None
         if self._maps is None:
-            if region is None:
-                return rgb.copy(), depth.copy(), labels.copy()
-            u0, v0, u1, v1 = region
-            return rgb[v0:v1, u0:u1].copy(), depth[v0:v1, u0:u1].copy(), labels[v0:v1, u0:u1].copy()
+            u0, v0, u1, v1 = region if region is not None else (0, 0, rgb.shape[1], rgb.shape[0])
+            sl = (slice(v0, v1), slice(u0, u1))
+            return (
+                rgb[sl].copy(),
+                depth[sl].copy() if want_depth else None,
+                labels[sl].copy() if want_labels and labels is not None else None,
+            )
         (m1, m2), (n1, n2) = self._maps
         if region is not None:
             u0, v0, u1, v1 = region
             m1, m2, n1, n2 = (None if m is None else m[v0:v1, u0:u1] for m in (m1, m2, n1, n2))
+
+        def nearest(a: np.ndarray) -> np.ndarray:
+            return cv2.remap(a, n1, n2, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
         return (
             cv2.remap(rgb, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0),
-            cv2.remap(depth, n1, n2, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0),
-            cv2.remap(labels, n1, n2, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0),
+            nearest(depth) if want_depth else None,
+            nearest(labels) if want_labels and labels is not None else None,
         )
 
-    def _finish(
-        self, canvas: tuple[np.ndarray, np.ndarray, np.ndarray], dirty: Sequence[Rect] | None = None
-    ) -> CameraImages:
+    def _finish(self, canvas: Layers, dirty: Sequence[Rect] | None = None) -> CameraImages:
         """Distort the canvas into new output images; only ``dirty`` canvas regions if given."""
         last = self._last
         if dirty is None or last is None:
             out = CameraImages(*self._distort(canvas))
-            out.changed = last is None or not (
-                np.array_equal(out.rgb, last.rgb)
-                and np.array_equal(out.depth_m, last.depth_m)
-                and np.array_equal(out.labels, last.labels)
+            out.changed = last is None or not all(
+                a is None or b is None or np.array_equal(a, b)
+                for a, b in ((out.rgb, last.rgb), (out.depth_m, last.depth_m), (out.labels, last.labels))
             )
         else:
             assert last.rgb is not None
-            assert last.depth_m is not None
-            assert last.labels is not None
-            out = CameraImages(last.rgb.copy(), last.depth_m.copy(), last.labels.copy(), changed=False)
+            out = CameraImages(
+                last.rgb.copy(),
+                None if last.depth_m is None else last.depth_m.copy(),
+                None if last.labels is None else last.labels.copy(),
+                changed=False,
+            )
             for rect in dirty:
                 u0, v0, u1, v1 = region = self._image_rect(rect)
                 if u0 >= u1 or v0 >= v1:
                     continue
-                for dst, new in zip((out.rgb, out.depth_m, out.labels), self._distort(canvas, region)):
+                dsts: tuple[np.ndarray | None, ...] = (out.rgb, out.depth_m, out.labels)
+                for dst, new in zip(dsts, self._distort(canvas, region)):
+                    if dst is None or new is None:
+                        continue
                     if not out.changed and not np.array_equal(dst[v0:v1, u0:u1], new):
                         out.changed = True
                     dst[v0:v1, u0:u1] = new
         self._last = out
         return out
 
-    def render(self, movable_aabbs: Sequence[Aabb] = ()) -> CameraImages:
-        """Render the current scene; ``movable_aabbs`` bound every body that may have moved."""
+    def render(self, moved_aabbs: Sequence[Aabb] = ()) -> CameraImages:
+        """Render the current scene.
+
+        ``moved_aabbs`` bound everything that looks different than in the last render: every
+        body that moved since, where it was then and where it is now (``MovedAgents.boxes`` in
+        ``sim/dynamic_layer.py`` keeps that account). Without any, the last images are reused.
+        """
         if not self.layered:
             return self._finish(self._full_canvas())
         if self._static is None or self._canvas is None:
             raise RuntimeError("render_static() must run before render() in layered mode")
-        rects = self.canvas_rects(movable_aabbs)
-        if not rects and not self._dirty and self._last is not None:
+        rects = self.canvas_rects(moved_aabbs)
+        if not rects and self._last is not None:
             last = self._last
             return CameraImages(last.rgb, last.depth_m, last.labels, changed=False)
-        for u0, v0, u1, v1 in self._dirty:
-            for layer, static in zip(self._canvas, self._static):
-                layer[v0:v1, u0:u1] = static[v0:v1, u0:u1]
         for rect in rects:
-            u0, v0, u1, v1 = rect
-            for layer, new in zip(self._canvas, self._render_rect(rect)):
-                layer[v0:v1, u0:u1] = new
-        dirty = merge_rects(self._dirty + rects)
-        self._dirty = rects
-        return self._finish(self._canvas, dirty if self._last is not None else None)
+            self._composite(rect)
+        return self._finish(self._canvas, rects if self._last is not None else None)

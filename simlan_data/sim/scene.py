@@ -7,6 +7,7 @@ the cameras' static layers (movable bodies hidden) and spawns the agents.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import tempfile
 from dataclasses import dataclass, field
@@ -27,6 +28,7 @@ from ..world.builder import PhysicsParams, WorldBodies, build_world
 from ..world.layout import Placement, load_layout
 from ..world.models import BUILDING_X_M, BUILDING_Y_M
 from .agents import Agent, spawn_agent
+from .dynamic_layer import MovedAgents, StaticMeshes
 from .pybullet_client import Client, connect
 from .rendering import CameraRenderer, LabelTable
 
@@ -166,6 +168,8 @@ class Scene:
     agents: list[Agent]
     labels: LabelTable
     names: dict[int, str] = field(default_factory=dict)
+    meshes: StaticMeshes | None = None  # layered: the warehouse meshes, removed between static layers
+    moved: MovedAgents | None = None
     _baked: dict[int, tuple] = field(default_factory=dict)
 
     @staticmethod
@@ -209,6 +213,7 @@ class Scene:
                 near_m=cam_cfg.near_m,
                 far_m=cam_cfg.far_m,
                 layered=cfg.render.layered,
+                streams=cam_cfg.streams,
             )
             for cam in inputs.cameras
         ]
@@ -226,6 +231,10 @@ class Scene:
         names = dict(world.names)
         names.update({a.body: a.namespace for a in agents})
         scene = Scene(client, world, inputs.cameras, renderers, agents, labels, names)
+        if cfg.render.layered:  # region renders draw only what moves (see sim/dynamic_layer.py)
+            scene.meshes = StaticMeshes(client.id, world, labels)
+            scene.meshes.remove()
+            scene.moved = MovedAgents(agents)
         scene._baked = {b: scene._body_state(b) for b in sorted(world.movable)}
         return scene
 
@@ -234,11 +243,19 @@ class Scene:
         return np.array(pos + orn), pb.getAABB(body, -1, physicsClientId=self.client.id)
 
     def agent_aabbs(self) -> list[tuple]:
-        """AABBs of every agent link: the regions the layered renderer draws each frame."""
+        """AABBs of every agent link."""
         boxes: list[tuple] = []
         for agent in self.agents:
             boxes.extend(agent.aabbs())
         return boxes
+
+    def moved_boxes(self) -> list[tuple]:
+        """What the cameras must draw again: boxes of the agents that moved (then and now).
+
+        In layered mode only agents that moved since they were last drawn count; otherwise
+        every agent.
+        """
+        return self.moved.boxes() if self.moved is not None else self.agent_aabbs()
 
     def refresh_static_layers(self) -> int:
         """Re-render the static layers that show a world object which moved (pushed pallets...).
@@ -256,7 +273,8 @@ class Scene:
             return 0
         stale = [r for r in self.renderers if r.layered and r.canvas_rects(moved)]
         if stale:
-            with _Hidden(self.client.id, [a.body for a in self.agents]):
+            shown = self.meshes.shown() if self.meshes is not None else contextlib.nullcontext()
+            with shown, _Hidden(self.client.id, [a.body for a in self.agents]):
                 for r in stale:
                     r.render_static()
         return len(stale)

@@ -5,7 +5,8 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
     step k, t = k / physics_hz
       truth tick     /clock, /ground_truth/poses
       camera tick    layered render per camera -> encode (workers) -> bag
-                     JPEG -> localizer (search, detect, fuse) -> /camera_<id>/marker_detections
+                     JPEG -> decode, marker search (workers, while the next cameras render)
+                          -> localizer (in camera order: poses, fuse) -> /camera_<id>/marker_detections
       control tick   estimates -> coordinator -> navigators -> cmd_vel -> wheel motors;
                      collision sensing; /tf, /<ns>/pose_estimate, plan, goal, status
                      (every n-th: all frames -> bird's-eye stitcher -> JPEG -> /birdseye/image)
@@ -16,8 +17,10 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -27,6 +30,7 @@ from .._pybullet import pb
 from ..config import Config
 from ..constants import FORMAT_VERSION, NS_PER_S
 from ..evaluation.replay import camera_from_messages
+from ..geometry.camera import CameraModel
 from ..gpss.localization import LocalizerParams
 from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
 from ..recording import messages as M
@@ -34,6 +38,7 @@ from ..recording.writer import NullWriter, RecordingWriter
 from .birdseye_live import BirdseyeRecorder
 from .camera_recording import CameraRecorder
 from .publishing import Publisher, camera_tf
+from .rendering import CameraImages
 from .scene import Inputs, Scene
 
 
@@ -43,6 +48,9 @@ class RunStats:
 
     sim_duration_ns: int = 0
     wall_s: float = 0.0
+    cameras: int = 0
+    cpu_s: float = 0.0  # CPU time of the whole process (every thread) during the loop
+    main_cpu_s: float = 0.0  # CPU time of the simulation thread during the loop
     physics_steps: int = 0
     camera_frames: int = 0
     camera_frames_changed: int = 0
@@ -63,7 +71,10 @@ class RunStats:
         out: dict[str, float] = {
             "sim.rtf": sim_s / self.wall_s if self.wall_s > 0 else 0.0,
             "sim.duration_s": sim_s,
+            "sim.cameras": float(self.cameras),
             "sim.wall_s": self.wall_s,
+            "sim.cpu_s": self.cpu_s,
+            "sim.main_thread_cpu_s": self.main_cpu_s,
             "sim.physics_steps": float(self.physics_steps),
             "sim.camera_frames": float(self.camera_frames),
             "sim.camera_frames_changed": float(self.camera_frames_changed),
@@ -100,7 +111,9 @@ class Simulation:
     def run(self, bag_path: Path, *, progress: Callable[[float], None] | None = None) -> RunStats:
         """Simulate ``duration_s`` and write the bag at ``bag_path`` (which must not exist)."""
         cfg = self.cfg
-        stats = RunStats(calibration_issues=list(self.inputs.calibration_issues))
+        stats = RunStats(
+            calibration_issues=list(self.inputs.calibration_issues), cameras=len(self.inputs.cameras)
+        )
         scene = Scene.build(cfg, self.inputs)
         stats.renderer = scene.client.backend
         stats.layout_notes = list(scene.world.layout_conflicts)
@@ -127,9 +140,11 @@ class Simulation:
                     writer.set_metadata(f"simlan.{key}", value)
                 # set up before the clock starts, like the scene (lookup tables take a second or two)
                 self.birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
-                wall0 = time.perf_counter()
+                wall0, cpu0, main0 = time.perf_counter(), time.process_time(), time.thread_time()
                 self._loop(scene, writer, stats, progress)
                 stats.wall_s = time.perf_counter() - wall0
+                stats.main_cpu_s = time.thread_time() - main0
+            stats.cpu_s = time.process_time() - cpu0  # after the writer drained its queue
             stats.message_counts = dict(writer.message_counts)
             stats.byte_counts = dict(writer.byte_counts)
             if cfg.recording.enabled:
@@ -182,6 +197,36 @@ class Simulation:
             source=loc.source,
         )
 
+    def _search(
+        self,
+        stack: GpssStack,
+        writer: RecordingWriter,
+        camera: CameraModel,
+        plan: str | list,
+        images: CameraImages,
+        encoded: Any,
+    ) -> Future[tuple[list, float]]:
+        """Search one image for markers, on an encoder thread when there is one.
+
+        The localizer sees what the bag holds (the decoded JPEG, which the encoder thread
+        decodes right after encoding it), so replay reproduces it; the search runs while the
+        simulation thread renders the next cameras, and its result is taken in camera order.
+        """
+        localizer, cid = stack.localizer, camera.camera_id
+
+        def search() -> tuple[list, float]:
+            rgb = encoded.result() if encoded is not None else None
+            if rgb is not None:
+                return localizer.detect(cid, plan, jpeg=rgb.data, gray=rgb.gray)
+            gray = np.asarray(cv2.cvtColor(np.asarray(images.rgb), cv2.COLOR_RGB2GRAY), dtype=np.uint8)
+            return localizer.detect(cid, plan, gray=gray)
+
+        if self.cfg.recording.enabled:
+            return writer.run_async(search)  # type: ignore[return-value]
+        done: Future[tuple[list, float]] = Future()
+        done.set_result(search())
+        return done
+
     # --------------------------------------------------------------------------- the loop
     def _loop(
         self, scene: Scene, writer: RecordingWriter, stats: RunStats, progress: Callable[[float], None] | None
@@ -196,6 +241,7 @@ class Simulation:
             list(cfg.cameras.streams),
             depth_every=self.depth_every,
             semantic_every=self.semantic_every,
+            decode_gray=stack.source == "camera",
         )
         for a in scene.agents:
             stats.collisions[a.namespace] = 0
@@ -213,35 +259,29 @@ class Simulation:
             if step % self.camera_every == 0:
                 render0 = time.perf_counter()
                 scene.refresh_static_layers()
-                aabbs = scene.agent_aabbs()
+                moved = scene.moved_boxes()
                 frames = []
                 for renderer in scene.renderers:
-                    images = renderer.render(aabbs)
+                    camera = renderer.camera
+                    images = renderer.render(moved)
                     stats.camera_frames += 1
                     stats.camera_frames_changed += int(images.changed)
-                    frames.append(
-                        (
-                            renderer.camera,
-                            images,
-                            recorder.record(t, step // self.camera_every, renderer.camera, images),
-                        )
+                    encoded = recorder.record(t, step // self.camera_every, camera, images)
+                    plan = stack.search_plan(t, camera.camera_id)
+                    search = (
+                        None if plan is None else self._search(stack, writer, camera, plan, images, encoded)
                     )
+                    frames.append((camera, images, plan, search))
                 if birdseye is not None:
                     birdseye.tick(t, step // self.camera_every, [f[1] for f in frames])
                 loc0 = time.perf_counter()
                 stats.render_wall_s += loc0 - render0
-                for camera, images, encoded in frames:
-                    # the localizer sees what the bag holds (decoded JPEG), so replay can reproduce it
-                    if encoded is not None and encoded.result() is not None:
-                        mode = stack.camera_frame(t, camera.camera_id, jpeg=encoded.result()[1])
-                    else:
-                        mode = stack.camera_frame(
-                            t, camera.camera_id, gray=cv2.cvtColor(images.rgb, cv2.COLOR_RGB2GRAY)
-                        )
-                    if mode is not None:
-                        pub.detections(
-                            t, camera, stack.localizer.last_detections.get(camera.camera_id, []), mode
-                        )
+                for camera, _, plan, search in frames:
+                    if plan is None or search is None:
+                        continue
+                    detections, seconds = search.result()
+                    mode = stack.camera_detections(t, camera.camera_id, plan, detections, seconds)
+                    pub.detections(t, camera, detections, mode)
                 stack.close_camera_tick(t)
                 stats.localize_wall_s += time.perf_counter() - loc0
                 if progress is not None:

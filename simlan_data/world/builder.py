@@ -39,6 +39,8 @@ class WorldBodies:
     movable: set[int] = field(default_factory=set)
     floor: set[int] = field(default_factory=set)
     visual_only: set[int] = field(default_factory=set)
+    # visual-only body -> (its visual shape, colour): to create the body again after removing it
+    visual_shapes: dict[int, tuple[int, tuple[float, ...]]] = field(default_factory=dict)
     layout_conflicts: list[str] = field(default_factory=list)
     skipped_models: dict[str, int] = field(default_factory=dict)
 
@@ -274,4 +276,5 @@ def build_world(
         pb.changeVisualShape(body, -1, rgbaColor=list(rgba), physicsClientId=client)
         out.labels[body] = label_id(semantic)
         out.visual_only.add(body)
+        out.visual_shapes[body] = (vis, tuple(rgba))
     return out
