@@ -140,7 +140,7 @@ class PosemapConfig:
         if bool(self.drive) != bool(self.drive_model):
             raise _bad(
                 "drive" if not self.drive else "drive_model",
-                self.drive or self.drive_model,
+                "",
                 "the drive needs both a landmark source (posemap.drive) and a model (posemap.drive_model)",
                 "set both",
             )

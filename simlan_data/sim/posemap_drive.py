@@ -112,37 +112,73 @@ def load_stream(path: str, cameras: list[str], *, period_ns: int, namespace: str
     )
 
 
+@dataclass
+class DriveInputs:
+    """What posing needs from files, read and checked before a run writes anything."""
+
+    keys: NDArray[np.float64] | None = None  # motion keyframes (K, 47)
+    stream: LandmarkStream | None = None
+    predicted: NDArray[np.float64] | None = None  # the model's joint targets per stream frame
+    predict_s: float = 0.0
+
+
+def load_drive_inputs(cfg: Config) -> DriveInputs | None:
+    """Motion files, or the landmark source and the model (which predicts every frame now)."""
+    pm = cfg.posemap
+    if not (pm.drive or pm.motion or pm.landmarks_rate_hz > 0):
+        return None
+    agent = cfg.agents.get(pm.namespace)
+    if agent is None or agent.type != "posed_humanoid":
+        raise ConfigError(
+            f"no posed humanoid {pm.namespace}",
+            "posemap.namespace",
+            "posemap.drive, posemap.motion and posemap.landmarks_rate_hz pose an agent of type posed_humanoid",
+            "add one (agents=posed_humanoid) or set posemap.namespace",
+        )
+    if pm.landmarks_rate_hz > 0:
+        every = cfg.cameras.rate_hz / pm.landmarks_rate_hz
+        if every < 1 - 1e-9 or abs(every - round(every)) > 1e-9:
+            raise ConfigError(
+                f"invalid posemap.landmarks_rate_hz={pm.landmarks_rate_hz}",
+                "config",
+                f"must divide the camera rate cameras.rate_hz={cfg.cameras.rate_hz}",
+                f"use e.g. {cfg.cameras.rate_hz:g}",
+            )
+    out = DriveInputs()
+    if pm.drive:
+        mapper = TrainedMapper(pm.drive_model)
+        out.stream = load_stream(
+            pm.drive, mapper.cameras, period_ns=round(NS_PER_S / cfg.cameras.rate_hz), namespace=pm.namespace
+        )
+        t0 = time.perf_counter()
+        out.predicted = mapper.predict(out.stream.landmarks)
+        out.predict_s = time.perf_counter() - t0
+    elif pm.motion:
+        out.keys = np.stack([load_motion(m) for m in pm.motion])
+    return out
+
+
 class PoseDriver:
     """Targets for the posed humanoid each control tick; records joint states and landmarks."""
 
-    def __init__(self, cfg: Config, agent: PosedHumanoidAgent, writer: RecordingWriter) -> None:
+    def __init__(
+        self, cfg: Config, agent: PosedHumanoidAgent, writer: RecordingWriter, inputs: DriveInputs
+    ) -> None:
         pm = cfg.posemap
         self.agent, self.writer = agent, writer
         self.topic = schema.agent_topics(agent.namespace)["joint_states"]
         self.frame_id = schema.base_link_frame(agent.namespace)
-        self.keys: NDArray[np.float64] | None = None
+        self.keys = inputs.keys
         self.period_ns = round(pm.motion_period_s * NS_PER_S)
-        self.stream: LandmarkStream | None = None
-        self.predicted: NDArray[np.float64] | None = None
+        self.stream = inputs.stream
+        self.predicted = inputs.predicted
         self.metrics: dict[str, float] = {}
         self._published_frame = -1
-        if pm.drive:
-            mapper = TrainedMapper(pm.drive_model)
-            self.stream = load_stream(
-                pm.drive,
-                mapper.cameras,
-                period_ns=round(NS_PER_S / cfg.cameras.rate_hz),
-                namespace=agent.namespace,
-            )
-            t0 = time.perf_counter()
-            self.predicted = mapper.predict(self.stream.landmarks)
+        if self.predicted is not None:
             self.metrics["posemap.drive.frames"] = float(len(self.predicted))
             self.metrics["posemap.drive.predict_ms_per_frame"] = (
-                1e3 * (time.perf_counter() - t0) / len(self.predicted)
+                1e3 * inputs.predict_s / max(1, len(self.predicted))
             )
-            self.model_cameras = mapper.cameras
-        elif pm.motion:
-            self.keys = np.stack([load_motion(m) for m in pm.motion])
         self.estimator = ProjectionEstimator(seed=cfg.seed + 1) if pm.landmarks_rate_hz > 0 else None
         self.landmarks_every = (
             round(cfg.cameras.rate_hz / pm.landmarks_rate_hz) if pm.landmarks_rate_hz > 0 else 0
@@ -224,18 +260,11 @@ class PoseDriver:
         return self.metrics
 
 
-def make_driver(cfg: Config, agents: list, writer: RecordingWriter) -> PoseDriver | None:
-    """The driver of ``posemap.namespace`` if the run has a posed humanoid there and something to do."""
-    pm = cfg.posemap
-    wanted = pm.drive or pm.motion or pm.landmarks_rate_hz > 0
+def make_driver(
+    cfg: Config, agents: list, writer: RecordingWriter, inputs: DriveInputs | None
+) -> PoseDriver | None:
+    """The driver of the posed humanoid ``posemap.namespace``; without inputs it records its joint states."""
     for a in agents:
-        if isinstance(a, PosedHumanoidAgent) and a.namespace == pm.namespace:
-            return PoseDriver(cfg, a, writer)
-    if wanted:
-        raise ConfigError(
-            f"no posed humanoid {pm.namespace}",
-            "posemap.namespace",
-            "posemap.drive, posemap.motion and posemap.landmarks_rate_hz pose an agent of type posed_humanoid",
-            "add one (agents=posed_humanoid) or set posemap.namespace",
-        )
+        if isinstance(a, PosedHumanoidAgent) and a.namespace == cfg.posemap.namespace:
+            return PoseDriver(cfg, a, writer, inputs or DriveInputs())
     return None

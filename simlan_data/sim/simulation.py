@@ -208,7 +208,9 @@ class Simulation:
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
         birdseye = self.birdseye
-        driver = make_driver(cfg, scene.agents, writer)  # posed humanoid: motion files or the drive
+        driver = make_driver(
+            cfg, scene.agents, writer, self.inputs.posemap
+        )  # posed humanoid: motion files or the drive
         ignore = scene.world.floor
         dt_control = self.control_every / self.physics_hz
         cid = scene.client.id
