@@ -16,6 +16,7 @@ ESTIMATORS = ("projection", "mediapipe")
 OCCLUSIONS = ("depth", "rays")
 MODELS = ("mlp", "fusion", "gbm")
 FEATURES = ("image", "rig")
+LOSSES = ("auto", "mse", "l1")
 
 
 def _bad(key: str, value: Any, why: str, fix: str) -> ConfigError:
@@ -47,6 +48,9 @@ class PosemapConfig:
     width: int = 0  # > 0: hidden = [width] * layers (for sweeps)
     layers: int = 3
     dropout: float = 0.1
+    loss: str = (
+        "auto"  # mse | l1 (the median: what the MAE rewards) | auto: mse for mlp (SIMLAN), l1 otherwise
+    )
     lr: float = 1e-3
     weight_decay: float = 0.0
     epochs: int = 200
@@ -83,6 +87,8 @@ class PosemapConfig:
             raise _bad("occlusion", self.occlusion, f"expected one of {', '.join(OCCLUSIONS)}", "use depth")
         if self.model not in MODELS:
             raise _bad("model", self.model, f"expected one of {', '.join(MODELS)}", "use fusion")
+        if self.loss not in LOSSES:
+            raise _bad("loss", self.loss, f"expected one of {', '.join(LOSSES)}", "use auto")
         if self.features not in FEATURES:
             raise _bad("features", self.features, f"expected one of {', '.join(FEATURES)}", "use rig")
         if not 0 <= self.samples <= 10_000_000:

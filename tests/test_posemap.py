@@ -400,3 +400,23 @@ def test_bad_posemap_config_gives_one_line_and_exit_2(
     proc = run_cli(*overrides, "progress=false", f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode == 2, proc.stderr
     assert expected in _one_error_line(proc.stderr)
+
+
+def test_ambiguous_joints_give_identical_landmarks() -> None:
+    """The shoulder (xyz) + elbow roty of an arm have one angle too many: another configuration on
+    the same curve moves no landmark. (This is why the MAE has a floor; see ambiguity.py.)"""
+    from scipy.spatial.transform import Rotation
+
+    q = S.sample_joints(np.random.default_rng(1), 1)[0]
+    idx = [
+        S.JOINT_NAMES.index(n)
+        for n in ("jRightShoulder_rotx", "jRightShoulder_roty", "jRightShoulder_rotz", "jRightElbow_roty")
+    ]
+    a = q[idx]
+    R = Rotation.from_euler("XYZ", a[:3]).as_matrix() @ Rotation.from_euler("Y", a[3]).as_matrix()
+    d = a[3] + 0.3
+    other = q.copy()
+    other[idx[:3]] = Rotation.from_matrix(R @ Rotation.from_euler("Y", -d).as_matrix()).as_euler("XYZ")
+    other[idx[3]] = d
+    assert np.abs(other - q).max() > 0.1
+    assert np.allclose(S.landmark_positions(other[None]), S.landmark_positions(q[None]), atol=1e-9)

@@ -1,7 +1,8 @@
 """Pose mappers: feature vectors -> the 47 joint targets (radians).
 
-- :class:`MLPMapper` (torch): fully connected ReLU layers with dropout, Adam(W), MSE on
-  standardised targets; keeps the epoch with the best validation MAE. With SIMLAN's hidden sizes
+- :class:`MLPMapper` (torch): fully connected ReLU layers with dropout, Adam(W), MSE (or L1:
+  the conditional median, which is what the MAE rewards where the landmarks cannot tell joints
+  apart) on standardised targets; keeps the epoch with the best validation MAE. With SIMLAN's hidden sizes
   [504, 476, 479] on one camera's x, y, z it is SIMLAN's baseline (``model=mlp``); on the rig
   features of all cameras it is the multi-view fusion model (``model=fusion``).
 - :class:`GBMMapper` (scikit-learn): one HistGradientBoostingRegressor per joint, in place of
@@ -59,6 +60,7 @@ class Standardizer:
 class TrainParams:
     hidden: list[int] = field(default_factory=lambda: [504, 476, 479])
     dropout: float = 0.1
+    loss: str = "mse"  # mse | l1
     lr: float = 1e-3
     weight_decay: float = 0.0
     epochs: int = 200
@@ -144,7 +146,7 @@ class MLPMapper(PoseMapper):
         sched = torch.optim.lr_scheduler.OneCycleLR(
             opt, max_lr=p.lr, total_steps=p.epochs * max(1, -(-len(xt) // p.batch_size)), pct_start=0.1
         )
-        loss_fn = torch.nn.MSELoss()
+        loss_fn = torch.nn.L1Loss() if p.loss == "l1" else torch.nn.MSELoss()
         gen = torch.Generator().manual_seed(p.seed)
         best, best_state = np.inf, None
         for epoch in range(p.epochs):
@@ -159,7 +161,7 @@ class MLPMapper(PoseMapper):
                 loss.backward()
                 opt.step()
                 sched.step()
-                total += float(loss) * len(idx)
+                total += float(loss.detach()) * len(idx)
             val_mae = _mae_rad(self.predict_from_tensor(xv), y_val) if len(x_val) else np.nan
             self.history.append(
                 {
@@ -224,6 +226,7 @@ class GBMMapper(PoseMapper):
         self.models = []
         for j in range(y.shape[1]):
             m = HistGradientBoostingRegressor(
+                loss="absolute_error" if p.loss == "l1" else "squared_error",
                 max_iter=p.gbm_iterations,
                 learning_rate=0.1,
                 max_leaf_nodes=63,

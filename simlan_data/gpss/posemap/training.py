@@ -78,6 +78,7 @@ def params_from(pm: PosemapConfig, seed: int) -> TrainParams:
     return TrainParams(
         hidden=pm.hidden_layers,
         dropout=pm.dropout,
+        loss=("mse" if pm.model == "mlp" else "l1") if pm.loss == "auto" else pm.loss,
         lr=pm.lr,
         weight_decay=pm.weight_decay,
         epochs=pm.epochs,
