@@ -33,7 +33,7 @@ SIMLAN = {"autogluon": 0.2465, "mlp": 0.359}
 MODELS = {
     # name: (overrides, what); the same epochs and batch for both MLPs
     "simlan_mlp": (
-        ["posemap.model=mlp", "posemap.cameras=[500]", "posemap.epochs=40", "posemap.batch_size=512"],
+        ["posemap.model=mlp", "posemap.cameras=[500]", "posemap.epochs=12", "posemap.batch_size=512"],
         "SIMLAN's MLP re-implemented: camera 500, x, y, z, [504, 476, 479], dropout 0.1, Adam, MSE",
     ),
     "gbm_1cam": (
@@ -41,14 +41,16 @@ MODELS = {
             "posemap.model=gbm",
             "posemap.cameras=[500]",
             "posemap.features=image",
-            "posemap.gbm_iterations=150",
+            "posemap.gbm_iterations=100",
+            "posemap.loss=mse",
+            "posemap.threads=1",
         ],
-        "gradient boosting per joint (L1), camera 500 (AutoGluon's stand-in)",
+        "gradient boosting per joint, camera 500 (AutoGluon's stand-in)",
     ),
     "fusion": (
         [
             "posemap.model=fusion",
-            "posemap.epochs=40",
+            "posemap.epochs=12",
             "posemap.batch_size=512",
             "posemap.width=512",
             "posemap.layers=3",

@@ -420,3 +420,29 @@ def test_ambiguous_joints_give_identical_landmarks() -> None:
     other[idx[3]] = d
     assert np.abs(other - q).max() > 0.1
     assert np.allclose(S.landmark_positions(other[None]), S.landmark_positions(q[None]), atol=1e-9)
+
+
+@pytest.mark.slow
+def test_fusion_beats_simlans_single_camera_mlp_on_the_same_data(tmp_path: Path) -> None:
+    """Guards the BENCHMARKS.md comparison at a CI-sized scale: 6000 samples, 12 epochs."""
+    ds = tmp_path / "dataset"
+    proc = run_cli(*DATASET_ARGS, "posemap.samples=6000", "posemap.occlusion=rays", f"hydra.run.dir={ds}")
+    assert proc.returncode == 0, proc.stderr
+    maes = {}
+    for name, overrides in (
+        ("simlan_mlp", ["posemap.model=mlp", "posemap.cameras=[500]"]),
+        ("fusion", ["posemap.model=fusion", "posemap.width=512", "posemap.dropout=0.0"]),
+    ):
+        run = tmp_path / name
+        proc = run_cli(
+            "experiment=posemap_train",
+            f"posemap.dataset={ds}",
+            "posemap.epochs=12",
+            "posemap.batch_size=512",
+            *overrides,
+            f"hydra.run.dir={run}",
+        )
+        assert proc.returncode == 0, proc.stderr
+        maes[name] = json.loads((run / "metrics.json").read_text())["posemap.mae_rad"]
+    assert maes["fusion"] < maes["simlan_mlp"] - 0.03, maes
+    assert maes["fusion"] < 0.359  # SIMLAN's reported single-camera MLP

@@ -219,17 +219,19 @@ class GBMMapper(PoseMapper):
 
     def fit(self, x: F32, y: F64, x_val: F32, y_val: F64, *, progress: bool = False) -> None:
         from sklearn.ensemble import HistGradientBoostingRegressor
+        from threadpoolctl import threadpool_limits
 
         p = self.params
         self.x_norm, self.y_norm = Standardizer.fit(x), Standardizer.fit(y)
         xs, ys = self.x_norm.apply(x), self.y_norm.apply(y)
         self.models = []
+        limit = threadpool_limits(limits=p.threads)  # OpenMP spin-waits badly on oversubscribed cores
         for j in range(y.shape[1]):
             m = HistGradientBoostingRegressor(
                 loss="absolute_error" if p.loss == "l1" else "squared_error",
                 max_iter=p.gbm_iterations,
                 learning_rate=0.1,
-                max_leaf_nodes=63,
+                max_leaf_nodes=31,
                 early_stopping=True,
                 validation_fraction=0.1,
                 n_iter_no_change=20,
@@ -239,6 +241,7 @@ class GBMMapper(PoseMapper):
             self.models.append(m)
             if progress:
                 print(f"  joint {j + 1}/{y.shape[1]}: {m.n_iter_} trees", flush=True)
+        limit.restore_original_limits()
         val_mae = _mae_rad(self.predict(x_val), y_val) if len(x_val) else np.nan
         self.history.append({"val_mae_rad": val_mae})
 
