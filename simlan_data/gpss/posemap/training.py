@@ -96,7 +96,7 @@ def _timing(
     mapper.predict(x)
     batch_s = time.perf_counter() - t0
     singles = []
-    for i in range(min(100, len(landmarks))):
+    for i in range(min(20, len(landmarks))):
         t1 = time.perf_counter()
         mapper.predict(features_for(landmarks[i : i + 1], spec))
         singles.append(time.perf_counter() - t1)
