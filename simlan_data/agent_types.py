@@ -20,7 +20,9 @@ class AgentType:
     name: str
     urdf: str  # file in assets/urdf, or "pybullet_data:<path>"
     semantic: str
-    drive: str  # "diff" (wheel motors), "walker" (kinematic, walks its path), "static"
+    drive: (
+        str  # "diff" (wheel motors), "walker" (kinematic, walks its path), "posed" (joint targets), "static"
+    )
     marker_xyz: tuple[float, float, float] | None = None  # marker face centre in base_link
     wheel_joints: tuple[str, str] = ("left_wheel_joint", "right_wheel_joint")
     wheel_radius_m: float = 0.1
@@ -96,6 +98,15 @@ AGENT_TYPES: dict[str, AgentType] = {
         max_yaw_rate_rps=3.0,
         footprint_m=(-0.2, 0.2, -0.3, 0.3),
         default_speed_mps=1.2,
+    ),
+    # the articulated humanoid of the pose mapping (issue 6): 47 joints on SIMLAN's support arm,
+    # posed from joint targets (motion files, pose-mapper predictions); it does not walk
+    "posed_humanoid": AgentType(
+        "posed_humanoid",
+        "humanoid.urdf",
+        "humanoid",
+        "posed",
+        footprint_m=(-0.35, 1.0, -0.85, 0.85),
     ),
     "panda": AgentType(
         "panda",

@@ -16,6 +16,7 @@ from omegaconf import MISSING
 
 from .errors import ConfigError
 from .gpss.birdseye import CanvasSpec
+from .posemap_config import PosemapConfig
 
 NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
 STREAMS = ("rgb", "depth", "semantic")
@@ -449,10 +450,12 @@ class Config:
     navigation: NavigationConfig = field(default_factory=NavigationConfig)
     agents: dict[str, AgentConfig] = field(default_factory=dict)
     birdseye: BirdseyeConfig = field(default_factory=BirdseyeConfig)
+    posemap: PosemapConfig = field(default_factory=PosemapConfig)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
             return
+        self.posemap.check()
         if not 0 < self.duration_s <= 24 * 3600:
             raise _bad(
                 "duration_s", self.duration_s, "must be within (0, 86400] seconds", "use e.g. duration_s=60"

@@ -179,6 +179,30 @@ def limit_threads(cores: int) -> None:
         cv2.setNumThreads(cores)
 
 
+def execute_posemap(cfg: Config, run_dir: Path, *, config_yaml: str) -> float:
+    """The pose-mapping tasks (``posemap.task``): a dataset, or a trained model; returns the
+    sweep objective (the validation MAE of a training run, the samples/s of a dataset)."""
+    task = cfg.posemap.task
+    out = run_dir / ("dataset.parquet" if task == "dataset" else "model")
+    if out.exists():
+        raise ConfigError(
+            f"{'dataset' if task == 'dataset' else 'model'} exists",
+            str(out),
+            "simlan_data never overwrites one",
+            "choose another hydra.run.dir",
+        )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if task == "dataset":
+        from .sim.posemap_dataset import generate_dataset
+
+        metrics = generate_dataset(cfg, run_dir, progress=cfg.progress)
+        return metrics["posemap.dataset.samples_per_s"]
+    from .gpss.posemap.training import train_from_config
+
+    metrics = train_from_config(cfg.posemap, run_dir, seed=cfg.seed, config_yaml=config_yaml)
+    return metrics["posemap.val.mae_rad"]
+
+
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def _app(cfg: DictConfig) -> Any:
     typed = to_config(cfg)
@@ -186,6 +210,8 @@ def _app(cfg: DictConfig) -> Any:
     run_dir = Path(hydra_cfg.runtime.output_dir)
     limit_threads(job_cpu_share(hydra_cfg))
     config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+    if typed.posemap.task != "none":
+        return execute_posemap(typed, run_dir, config_yaml=config_yaml)
     metrics = execute(typed, run_dir, config_yaml=config_yaml, progress=typed.progress)
     return metrics.get("sim.rtf")
 

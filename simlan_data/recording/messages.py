@@ -37,6 +37,8 @@ RunInfo = T[schema.RUN_INFO_TYPE]
 SemanticLabels = T[schema.SEMANTIC_LABELS_TYPE]
 CollisionState = T[schema.COLLISION_STATE_TYPE]
 MarkerDetections = T[schema.MARKER_DETECTIONS_TYPE]
+JointState = T[schema.JOINT_STATE_TYPE]
+PoseLandmarksMsg = T[schema.POSE_LANDMARKS_TYPE]
 NavigationStatusMsg = T[schema.NAVIGATION_STATUS_TYPE]
 LocalizationStatusMsg = T[schema.LOCALIZATION_STATUS_TYPE]
 PoseWithCovariance = T["geometry_msgs/msg/PoseWithCovariance"]
@@ -248,6 +250,37 @@ def marker_detections(
     corners = np.asarray(corners_px, dtype=np.float32).reshape(-1)
     return MarkerDetections(
         header=header(stamp_ns, frame_id), ids=np.asarray(ids, dtype=np.int32), corners_px=corners, mode=mode
+    )
+
+
+def joint_state(stamp_ns: int, frame_id: str, names: Sequence[str], positions: np.ndarray) -> Any:
+    empty = np.zeros(0, dtype=np.float64)
+    return JointState(
+        header=header(stamp_ns, frame_id),
+        name=list(names),
+        position=np.asarray(positions, dtype=np.float64),
+        velocity=empty,
+        effort=empty,
+    )
+
+
+def pose_landmarks(
+    stamp_ns: int, frame_id: str, landmarks: np.ndarray, *, estimator: str, width: int, height: int
+) -> Any:
+    """Landmarks (33, 4) = x, y, z, visibility; all-zero rows mean no person found."""
+    lm = np.asarray(landmarks, dtype=np.float32)
+    detected = bool((lm[:, 3] > 0).any())
+    cols = [lm[:, k].copy() if detected else np.zeros(0, dtype=np.float32) for k in range(4)]
+    return PoseLandmarksMsg(
+        header=header(stamp_ns, frame_id),
+        estimator=estimator,
+        detected=detected,
+        width=int(width),
+        height=int(height),
+        x=cols[0],
+        y=cols[1],
+        z=cols[2],
+        visibility=cols[3],
     )
 
 

@@ -39,6 +39,8 @@ NAVIGATION_STATUS_TYPE = "simlan_msgs/msg/NavigationStatus"
 LOCALIZATION_STATUS_TYPE = "simlan_msgs/msg/LocalizationStatus"
 POSE_COV_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+POSE_LANDMARKS_TYPE = "simlan_msgs/msg/PoseLandmarks"
 
 # ------------------------------------------------------------------------------------- topics
 CLOCK = "/clock"
@@ -102,6 +104,11 @@ def camera_topics(
                 "z-depth, 16UC1 millimetres in PNG (compressed_depth_image_transport), 0 = no return",
             )
         )
+    out["pose_landmarks"] = Topic(
+        f"{base}/pose_landmarks",
+        POSE_LANDMARKS_TYPE,
+        "33 MediaPipe-style body landmarks of the person in the image (posemap.landmarks_rate_hz, or the drive's input)",
+    )
     out["detections"] = Topic(
         f"{base}/marker_detections",
         MARKER_DETECTIONS_TYPE,
@@ -154,6 +161,11 @@ def agent_topics(namespace: str) -> dict[str, Topic]:
             f"/{namespace}/navigation_status",
             NAVIGATION_STATUS_TYPE,
             "navigation state, goals reached, on change",
+        ),
+        "joint_states": Topic(
+            f"/{namespace}/joint_states",
+            JOINT_STATE_TYPE,
+            "joint positions of a posed humanoid (47 joints, radians), control rate",
         ),
         "localization": Topic(
             f"/{namespace}/localization_status",

@@ -3,7 +3,7 @@
 - :class:`DiffDriveAgent`: robots (pallet truck, forklift, jackal) with wheel motors and an ArUco
   marker, driven by velocity commands through physics;
 - :class:`WalkerAgent`: a person moved kinematically along its path (the articulated humanoid of
-  the pose-mapping work is separate);
+  the pose mapping, posed from joint targets, is ``humanoid.PosedHumanoidAgent``);
 - :class:`StaticAgent`: a fixed robot (the Panda arm).
 
 All report their ground-truth pose and sense collisions (contacts with anything but the floor).
@@ -244,4 +244,8 @@ def spawn_agent(
         return DiffDriveAgent(client, namespace, kind, pose=pose, marker_id=marker_id)
     if kind.drive == "walker":
         return WalkerAgent(client, namespace, kind, pose=pose)
+    if kind.drive == "posed":
+        from .humanoid import PosedHumanoidAgent  # humanoid.py builds on this module
+
+        return PosedHumanoidAgent(client, namespace, kind, pose=pose)
     return StaticAgent(client, namespace, kind, pose=pose)

@@ -29,6 +29,7 @@ from ..world.layout import Placement, load_layout
 from ..world.models import BUILDING_X_M, BUILDING_Y_M
 from .agents import Agent, spawn_agent
 from .dynamic_layer import MovedAgents, StaticMeshes
+from .posemap_drive import DriveInputs, load_drive_inputs
 from .pybullet_client import Client, connect
 from .rendering import CameraRenderer, LabelTable
 
@@ -48,6 +49,7 @@ class Inputs:
     placements: list[Placement]
     agent_types: dict[str, AgentType]
     grid: OccupancyGrid
+    posemap: DriveInputs | None = None  # posed humanoid: motion keyframes or the drive's predictions
 
 
 def load_cameras(cfg: Config) -> tuple[list[CameraModel], list[str]]:
@@ -112,7 +114,7 @@ def load_inputs(cfg: Config) -> Inputs:
                     "the goal is inside an obstacle or outside the map",
                     "pick a goal on free floor (see the occupancy grid in report.md)",
                 )
-    return Inputs(cameras, issues, placements, types, grid)
+    return Inputs(cameras, issues, placements, types, grid, load_drive_inputs(cfg))
 
 
 def footprint_corners(kind: AgentType, pose: list[float]) -> np.ndarray:

@@ -4,9 +4,11 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
 
     step k, t = k / physics_hz
       truth tick     /clock, /ground_truth/poses
+      control tick   posed humanoid: targets (motion / drive) -> joints -> /<ns>/joint_states
       camera tick    layered render per camera -> encode (workers) -> bag
                      JPEG -> decode, marker search (workers, while the next cameras render)
                           -> localizer (in camera order: poses, fuse) -> /camera_<id>/marker_detections
+                     (posemap.landmarks_rate_hz) projection estimator -> /camera_<id>/pose_landmarks
       control tick   estimates -> coordinator -> navigators -> cmd_vel -> wheel motors;
                      collision sensing; /tf, /<ns>/pose_estimate, plan, goal, status
                      (every n-th: all frames -> bird's-eye stitcher -> JPEG -> /birdseye/image)
@@ -37,6 +39,7 @@ from ..recording import messages as M
 from ..recording.writer import NullWriter, RecordingWriter
 from .birdseye_live import BirdseyeRecorder
 from .camera_recording import CameraRecorder
+from .posemap_drive import make_driver
 from .publishing import Publisher, camera_tf
 from .rendering import CameraImages
 from .scene import Inputs, Scene
@@ -65,6 +68,7 @@ class RunStats:
     layout_notes: list[str] = field(default_factory=list)
     navigation: dict[str, object] = field(default_factory=dict)  # namespace -> NavigationStatus
     recording_bytes: int = 0
+    extra_metrics: dict[str, float] = field(default_factory=dict)  # e.g. posemap.drive.*
 
     def metrics(self) -> dict[str, float]:
         sim_s = self.sim_duration_ns / NS_PER_S
@@ -87,6 +91,7 @@ class RunStats:
         for ns in sorted(self.collisions):
             out[f"agents.{ns}.collisions"] = float(self.collisions[ns])
             out[f"agents.{ns}.distance_m"] = round(self.distance_m.get(ns, 0.0), 6)
+        out.update(self.extra_metrics)
         return out
 
 
@@ -249,6 +254,9 @@ class Simulation:
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
         birdseye = self.birdseye
+        driver = make_driver(
+            cfg, scene.agents, writer, self.inputs.posemap
+        )  # posed humanoid: motion files or the drive
         ignore = scene.world.floor
         dt_control = self.control_every / self.physics_hz
         cid = scene.client.id
@@ -256,6 +264,8 @@ class Simulation:
             t = self.stamp_ns(step)
             if step % self.truth_every == 0:
                 pub.ground_truth(t)
+            if driver is not None and step % self.control_every == 0:
+                driver.control_tick(t)  # before the cameras: the images at t show the pose at t
             if step % self.camera_every == 0:
                 render0 = time.perf_counter()
                 scene.refresh_static_layers()
@@ -274,6 +284,8 @@ class Simulation:
                     frames.append((camera, images, plan, search))
                 if birdseye is not None:
                     birdseye.tick(t, step // self.camera_every, [f[1] for f in frames])
+                if driver is not None:
+                    driver.camera_tick(t, step // self.camera_every, [(f[0], f[1]) for f in frames])
                 loc0 = time.perf_counter()
                 stats.render_wall_s += loc0 - render0
                 for camera, _, plan, search in frames:
@@ -320,5 +332,7 @@ class Simulation:
                 pb.stepSimulation(physicsClientId=cid)
                 stats.physics_steps += 1
         stats.sim_duration_ns = self.stamp_ns(self.steps)
+        if driver is not None:
+            stats.extra_metrics.update(driver.finish())
         stats.navigation = {ns: nav.status for ns, nav in stack.navigators.items()}
         self.stack = stack

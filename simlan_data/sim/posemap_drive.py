@@ -1,0 +1,270 @@
+"""Pose a humanoid during a run: from motion files, or from a landmark stream through a trained model.
+
+    posemap.motion=[...]            keyframes (SIMLAN motion files), each held then blended over
+                                    posemap.motion_period_s, in turn
+    posemap.drive=SOURCE            landmark frames (a dataset, or a recording's
+    posemap.drive_model=MODEL       /camera_<id>/pose_landmarks) --> trained mapper --> joint targets,
+                                    frame k at k / cameras.rate_hz (dataset) or at its recorded stamp
+
+Every control tick the posed humanoid ``posemap.namespace`` takes its targets and its joint
+positions are recorded on ``/<ns>/joint_states`` (sensor_msgs/JointState). With
+``posemap.landmarks_rate_hz > 0`` the projection estimator runs on the rendered camera frames and
+publishes ``/camera_<id>/pose_landmarks`` (a landmark stream a later drive can replay). The
+drive's input landmarks are published on the same topics (estimator ``replay``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config import Config
+from ..constants import NS_PER_S
+from ..errors import ConfigError
+from ..geometry.camera import CameraModel
+from ..gpss.posemap.dataset import PARQUET_NAME, read_dataset
+from ..gpss.posemap.estimators import CameraView, ProjectionEstimator
+from ..gpss.posemap.metrics import mpjpe
+from ..gpss.posemap.motion import load_motion
+from ..gpss.posemap.skeleton import JOINT_NAMES, NUM_LANDMARKS
+from ..gpss.posemap.training import TrainedMapper
+from ..recording import messages as M
+from ..recording import schema
+from ..recording.reader import RecordingReader
+from ..recording.writer import RecordingWriter
+from .humanoid import PosedHumanoidAgent
+from .rendering import CameraImages
+
+
+@dataclass
+class LandmarkStream:
+    """Landmark frames (F, C, 33, 4) of some cameras, their stamps and, if known, true joints."""
+
+    stamps_ns: NDArray[np.int64]
+    cameras: list[str]
+    landmarks: NDArray[np.float32]
+    truth: NDArray[np.float64] | None = None
+    sizes: dict[str, tuple[int, int]] = field(default_factory=dict)
+
+
+def stream_from_dataset(path: str, cameras: list[str], period_ns: int) -> LandmarkStream:
+    data = read_dataset(path).select_cameras(cameras)
+    sizes = {str(m["id"]): (int(m["width"]), int(m["height"])) for m in data.meta.get("camera_models", [])}
+    return LandmarkStream(np.arange(len(data)) * period_ns, cameras, data.landmarks, data.joints, sizes)
+
+
+def stream_from_recording(path: str, cameras: list[str], namespace: str) -> LandmarkStream:
+    """Landmark frames of ``cameras`` grouped by stamp; the recorded joint states of ``namespace`` as truth."""
+    topics = {
+        schema.camera_topics(c, rgb="jpeg", depth=None, semantic=None)["pose_landmarks"].name: c
+        for c in cameras
+    }
+    joint_topic = schema.agent_topics(namespace)["joint_states"].name
+    frames: dict[int, dict[str, np.ndarray]] = {}
+    sizes: dict[str, tuple[int, int]] = {}
+    joints: dict[int, np.ndarray] = {}
+    with RecordingReader(path) as bag:
+        missing = [t for t in topics if t not in bag.topics]
+        if missing:
+            raise ConfigError(
+                "recording has no landmarks for the model's cameras",
+                f"posemap.drive={path}",
+                f"missing {', '.join(missing)}",
+                "record with posemap.landmarks_rate_hz > 0 (experiment=posemap_motion) or drive from a dataset",
+            )
+        for m in bag.messages([*topics, joint_topic]):
+            if m.topic == joint_topic:
+                joints[m.stamp_ns] = np.asarray(m.msg.position, dtype=np.float64)
+                continue
+            lm = np.zeros((NUM_LANDMARKS, 4), dtype=np.float32)
+            if m.msg.detected:
+                lm[:] = np.stack([m.msg.x, m.msg.y, m.msg.z, m.msg.visibility], axis=1)
+            frames.setdefault(m.stamp_ns, {})[topics[m.topic]] = lm
+            sizes[topics[m.topic]] = (int(m.msg.width), int(m.msg.height))
+    stamps = sorted(s for s, f in frames.items() if len(f) == len(cameras))
+    if not stamps:
+        raise ConfigError(
+            "no complete landmark frames",
+            f"posemap.drive={path}",
+            "no stamp has landmarks of every camera",
+            "check the recording",
+        )
+    lm_all = np.stack([np.stack([frames[s][c] for c in cameras]) for s in stamps])
+    truth = np.stack([joints[s] for s in stamps]) if all(s in joints for s in stamps) else None
+    return LandmarkStream(np.asarray(stamps, dtype=np.int64), cameras, lm_all, truth, sizes)
+
+
+def load_stream(path: str, cameras: list[str], *, period_ns: int, namespace: str) -> LandmarkStream:
+    p = Path(path)
+    if p.suffix == ".parquet" or (p / PARQUET_NAME).is_file():
+        return stream_from_dataset(path, cameras, period_ns)
+    if p.exists():
+        return stream_from_recording(path, cameras, namespace)
+    raise ConfigError(
+        "landmark source not found",
+        f"posemap.drive={path}",
+        "no such dataset or recording",
+        "give a dataset run directory or a recording",
+    )
+
+
+@dataclass
+class DriveInputs:
+    """What posing needs from files, read and checked before a run writes anything."""
+
+    keys: NDArray[np.float64] | None = None  # motion keyframes (K, 47)
+    stream: LandmarkStream | None = None
+    predicted: NDArray[np.float64] | None = None  # the model's joint targets per stream frame
+    predict_s: float = 0.0
+
+
+def load_drive_inputs(cfg: Config) -> DriveInputs | None:
+    """Motion files, or the landmark source and the model (which predicts every frame now)."""
+    pm = cfg.posemap
+    if not (pm.drive or pm.motion or pm.landmarks_rate_hz > 0):
+        return None
+    agent = cfg.agents.get(pm.namespace)
+    if agent is None or agent.type != "posed_humanoid":
+        raise ConfigError(
+            f"no posed humanoid {pm.namespace}",
+            "posemap.namespace",
+            "posemap.drive, posemap.motion and posemap.landmarks_rate_hz pose an agent of type posed_humanoid",
+            "add one (agents=posed_humanoid) or set posemap.namespace",
+        )
+    if pm.landmarks_rate_hz > 0:
+        every = cfg.cameras.rate_hz / pm.landmarks_rate_hz
+        if every < 1 - 1e-9 or abs(every - round(every)) > 1e-9:
+            raise ConfigError(
+                f"invalid posemap.landmarks_rate_hz={pm.landmarks_rate_hz}",
+                "config",
+                f"must divide the camera rate cameras.rate_hz={cfg.cameras.rate_hz}",
+                f"use e.g. {cfg.cameras.rate_hz:g}",
+            )
+    out = DriveInputs()
+    if pm.drive:
+        mapper = TrainedMapper(pm.drive_model)
+        out.stream = load_stream(
+            pm.drive, mapper.cameras, period_ns=round(NS_PER_S / cfg.cameras.rate_hz), namespace=pm.namespace
+        )
+        t0 = time.perf_counter()
+        out.predicted = mapper.predict(out.stream.landmarks)
+        out.predict_s = time.perf_counter() - t0
+    elif pm.motion:
+        out.keys = np.stack([load_motion(m) for m in pm.motion])
+    return out
+
+
+class PoseDriver:
+    """Targets for the posed humanoid each control tick; records joint states and landmarks."""
+
+    def __init__(
+        self, cfg: Config, agent: PosedHumanoidAgent, writer: RecordingWriter, inputs: DriveInputs
+    ) -> None:
+        pm = cfg.posemap
+        self.agent, self.writer = agent, writer
+        self.topic = schema.agent_topics(agent.namespace)["joint_states"]
+        self.frame_id = schema.base_link_frame(agent.namespace)
+        self.keys = inputs.keys
+        self.period_ns = round(pm.motion_period_s * NS_PER_S)
+        self.stream = inputs.stream
+        self.predicted = inputs.predicted
+        self.metrics: dict[str, float] = {}
+        self._published_frame = -1
+        if self.predicted is not None:
+            self.metrics["posemap.drive.frames"] = float(len(self.predicted))
+            self.metrics["posemap.drive.predict_ms_per_frame"] = (
+                1e3 * inputs.predict_s / max(1, len(self.predicted))
+            )
+        self.estimator = ProjectionEstimator(seed=cfg.seed + 1) if pm.landmarks_rate_hz > 0 else None
+        self.landmarks_every = (
+            round(cfg.cameras.rate_hz / pm.landmarks_rate_hz) if pm.landmarks_rate_hz > 0 else 0
+        )
+
+    def targets(self, t_ns: int) -> NDArray[np.float64] | None:
+        if self.stream is not None and self.predicted is not None:
+            k = int(np.searchsorted(self.stream.stamps_ns, t_ns, side="right")) - 1
+            return self.predicted[max(0, k)]
+        if self.keys is not None:
+            n = len(self.keys)
+            phase = t_ns / self.period_ns
+            k = int(phase) % n
+            # hold each keyframe for half the period, blend to the next over the other half
+            a = min(1.0, max(0.0, 2.0 * (phase - int(phase)) - 1.0))
+            return (1 - a) * self.keys[k] + a * self.keys[(k + 1) % n]
+        return None
+
+    def control_tick(self, t_ns: int) -> None:
+        q = self.targets(t_ns)
+        if q is not None:
+            self.agent.set_joints(q)
+        self.writer.write(
+            self.topic, t_ns, M.joint_state(t_ns, self.frame_id, JOINT_NAMES, self.agent.joint_positions())
+        )
+        self._publish_input(t_ns)
+
+    def _publish_input(self, t_ns: int) -> None:
+        """The drive's input landmarks, once per frame, on the cameras' landmark topics."""
+        if self.stream is None:
+            return
+        k = int(np.searchsorted(self.stream.stamps_ns, t_ns, side="right")) - 1
+        if k < 0 or k == self._published_frame:
+            return
+        self._published_frame = k
+        for c, cam in enumerate(self.stream.cameras):
+            width, height = self.stream.sizes.get(cam, (0, 0))
+            topic = schema.camera_topics(cam, rgb="jpeg", depth=None, semantic=None)["pose_landmarks"]
+            self.writer.write(
+                topic,
+                t_ns,
+                M.pose_landmarks(
+                    t_ns,
+                    schema.camera_frame(cam),
+                    self.stream.landmarks[k, c],
+                    estimator="replay",
+                    width=width,
+                    height=height,
+                ),
+            )
+
+    def camera_tick(
+        self, t_ns: int, frame_index: int, frames: list[tuple[CameraModel, CameraImages]]
+    ) -> None:
+        """Live landmarks of the rendered frames (projection estimator, rendered depth for occlusion)."""
+        if self.estimator is None or frame_index % self.landmarks_every:
+            return
+        world = self.agent.landmarks_world()
+        views = [CameraView(cam, None, images.depth_m, world) for cam, images in frames]
+        out = self.estimator.estimate(views)
+        for (cam, _), lm in zip(frames, out):
+            topic = schema.camera_topics(cam.camera_id, rgb="jpeg", depth=None, semantic=None)[
+                "pose_landmarks"
+            ]
+            self.writer.write(
+                topic,
+                t_ns,
+                M.pose_landmarks(
+                    t_ns, cam.frame_id, lm, estimator=self.estimator.name, width=cam.width, height=cam.height
+                ),
+            )
+
+    def finish(self) -> dict[str, float]:
+        """Drive metrics: the driven joints against the source's true joints, where known."""
+        if self.stream is not None and self.predicted is not None and self.stream.truth is not None:
+            err = self.predicted - self.stream.truth
+            self.metrics["posemap.drive.mae_rad"] = float(np.abs(err).mean())
+            self.metrics["posemap.drive.mpjpe_m"], _ = mpjpe(self.predicted, self.stream.truth)
+        return self.metrics
+
+
+def make_driver(
+    cfg: Config, agents: list, writer: RecordingWriter, inputs: DriveInputs | None
+) -> PoseDriver | None:
+    """The driver of the posed humanoid ``posemap.namespace``; without inputs it records its joint states."""
+    for a in agents:
+        if isinstance(a, PosedHumanoidAgent) and a.namespace == cfg.posemap.namespace:
+            return PoseDriver(cfg, a, writer, inputs or DriveInputs())
+    return None
