@@ -4,7 +4,8 @@
     python -m simlan_data.run -m KEY=A,B ...                          a sweep
 
 Run directory (``hydra.run.dir``): ``recording/`` (ROS 2 bag), ``metrics.json``, ``report.md``,
-``.hydra/``; ``RUNNING`` exists while the run is in progress.
+``.hydra/``; ``RUNNING`` exists while the run is in progress (pid, host, simulated time reached);
+after a crash, ``python -m simlan_data.recover RUN_DIR`` repairs the recording.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +30,7 @@ from .evaluation.localization_replay import recording_metrics
 from .evaluation.replay import ReplayContext
 from .evaluation.report import write_report
 from .recording.reader import RecordingReader
+from .run_marker import RunMarker, write_running
 from .sim.scene import load_inputs
 from .sim.simulation import RunStats, Simulation
 
@@ -71,7 +74,8 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
         )
     run_dir.mkdir(parents=True, exist_ok=True)
     marker = run_dir / RUNNING_MARKER
-    marker.write_text("this run has not finished; if no process writes here any more, it crashed\n")
+    running = RunMarker.for_this_process(cfg.duration_s)
+    write_running(run_dir, running)
     sim = Simulation(cfg, inputs, config_yaml=config_yaml)
     bar = tqdm(
         total=round(cfg.duration_s, 3),
@@ -83,17 +87,27 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
 
     def on_progress(t_s: float) -> None:
         bar.update(round(t_s - bar.n, 6))
+        # how far the clock got: after a crash, recovery compares it with what the file holds
+        write_running(run_dir, replace(running, simulated_s=round(t_s, 9)))
+
+    def recover_hint() -> str:
+        return f"`python -m simlan_data.recover {run_dir}` reads what was recorded" if bag.exists() else ""
 
     try:
         stats = sim.run(bag, progress=on_progress)
-    except SimlanError:
-        raise
+    except SimlanError as err:
+        if isinstance(err, ConfigError) or not recover_hint():
+            raise
+        raise RunError(
+            err.what, err.where, err.why, "; ".join(x for x in (err.fix, recover_hint()) if x)
+        ) from err
     except Exception as err:
+        hint = recover_hint()
         raise RunError(
             "simulation failed",
             str(run_dir),
             f"{type(err).__name__}: {err}",
-            "rerun with --debug for the traceback",
+            "rerun with --debug for the traceback" + (f"; {hint}" if hint else ""),
         ) from err
     finally:
         bar.close()

@@ -14,8 +14,9 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
-from ..constants import FORMAT_MAJOR, NS_PER_S
+from ..constants import FORMAT_MAJOR, NS_PER_S, RECORDING_DIRNAME
 from ..errors import RecordingInputError
+from ..run_marker import read_running, writer_alive
 from . import schema
 
 METADATA_KEY_FORMAT = "simlan.format_version"
@@ -38,10 +39,27 @@ class TopicInfo:
     count: int
 
 
-def _bad(
-    path: Path, why: str, fix: str = "record it again or run `python -m simlan_data.replay PATH --recover`"
-) -> RecordingInputError:
+def _bad(path: Path, why: str, fix: str = "") -> RecordingInputError:
+    fix = fix or f"run `python -m simlan_data.recover {path}` to rebuild what is readable, or record it again"
     return RecordingInputError("not a readable recording", str(path), why, fix)
+
+
+def _unfinished(path: Path) -> RecordingInputError:
+    """The error for a bag directory with an MCAP file but no metadata.yaml."""
+    marker = read_running(path.parent)
+    if marker is not None and writer_alive(marker):
+        return RecordingInputError(
+            "recording is still being written",
+            str(path),
+            f"process {marker.pid} is running it (simulated {marker.simulated_s:.1f} of {marker.duration_s:g} s)",
+            "wait for the run to finish",
+        )
+    return RecordingInputError(
+        "recording is unfinished",
+        str(path),
+        "an MCAP file without metadata.yaml (the run crashed or was killed)",
+        f"run `python -m simlan_data.recover {path}` to keep everything up to its last flushed chunk",
+    )
 
 
 class RecordingReader:
@@ -51,12 +69,14 @@ class RecordingReader:
         p = Path(path)
         if p.is_file() and p.name == "metadata.yaml":
             p = p.parent
-        if p.is_dir() and not (p / "metadata.yaml").exists() and (p / "recording" / "metadata.yaml").exists():
-            p = p / "recording"  # a run directory
+        if p.is_dir() and not (p / "metadata.yaml").exists() and (p / RECORDING_DIRNAME).is_dir():
+            p = p / RECORDING_DIRNAME  # a run directory
         if not p.exists():
             raise _bad(p, "no such file or directory", "check the path")
         if not (p / "metadata.yaml").is_file():
-            raise _bad(p, "no metadata.yaml (not a ROS 2 bag, or an unfinished one)")
+            if p.is_dir() and any(p.glob("*.mcap")):
+                raise _unfinished(p)
+            raise _bad(p, "no metadata.yaml (not a ROS 2 bag)", "point to a recording directory")
         self.path = p
         self._store: Typestore = schema.typestore()
         try:
@@ -81,6 +101,11 @@ class RecordingReader:
     def custom_data(self) -> dict[str, str]:
         """metadata.yaml's custom_data (format version, seed, scenario, renderer)."""
         return dict(self._metadata.get("custom_data") or {})
+
+    @property
+    def recovered(self) -> bool:
+        """True for a recording rebuilt by ``python -m simlan_data.recover`` (its run crashed)."""
+        return self.custom_data.get("simlan.recovered") == "true"
 
     @property
     def topics(self) -> dict[str, TopicInfo]:
@@ -189,8 +214,8 @@ class RecordingReader:
                     raise RecordingInputError(
                         "message undecodable",
                         f"{self.path} topic {conn.topic} at {stamp} ns",
-                        f"{type(err).__name__}: {err}",
-                        "the recording is corrupt; try --recover",
+                        f"{type(err).__name__}: {_first(err)}",
+                        f"the recording is corrupt; `python -m simlan_data.recover {self.path}` keeps its intact chunks",
                     ) from err
                 yield Message(conn.topic, int(stamp), conn.msgtype, msg)
         except RecordingInputError:
@@ -198,7 +223,7 @@ class RecordingReader:
         except Exception as err:
             raise _bad(
                 self.path,
-                f"{type(err).__name__} while reading messages: {str(err).splitlines()[0] if str(err) else ''}",
+                f"{type(err).__name__} while reading messages: {_first(err)}",
             ) from err
 
     def first(self, topic: str) -> Message | None:
@@ -220,8 +245,14 @@ class RecordingReader:
             f"Start:             {self.start_ns / NS_PER_S:.3f} (simulated clock, s)",
             f"End:               {self.end_ns / NS_PER_S:.3f}",
             f"Messages:          {self.message_count}",
-            "Topic information:",
         ]
+        if self.recovered:
+            until = int(self.custom_data.get("simlan.recovered_until_ns", "0") or 0) / NS_PER_S
+            lines.append(
+                f"Recovered:         yes: the run crashed; data until {until:.3f} s, "
+                f"{self.custom_data.get('simlan.recovered_damaged_chunks', '0')} damaged chunks skipped"
+            )
+        lines.append("Topic information:")
         topics = sorted(self.topics.values(), key=lambda t: t.name)
         width = max((len(t.name) for t in topics), default=10)
         for t in topics:
