@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import queue
@@ -268,8 +269,12 @@ class RecordingWriter:
         self._stop_io()
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
-        self._flush_chunk()
-        self._writer.abort()
+        # best effort: the error that brought us here (a full disk...) is the one to report
+        with contextlib.suppress(Exception):
+            if self._io_error is None:
+                self._flush_chunk()
+        with contextlib.suppress(Exception):
+            self._writer.abort()
 
     # -------------------------------------------------------------------------------- writing
     def write(self, topic: Topic, stamp_ns: int, msg: Any) -> None:
