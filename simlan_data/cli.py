@@ -15,6 +15,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from .constants import CONF_DIR
 from .errors import EXIT_BAD_INPUT, EXIT_FAILED_RUN, SimlanError
+from .validation import config_error_from
 
 log = logging.getLogger("simlan_data")
 
@@ -98,7 +99,7 @@ def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
     except BaseException as err:
         if debug:
             raise
-        ours = _root_simlan_error(err)
+        ours = _root_simlan_error(err) or config_error_from(err)
         if ours is not None:
             fail(ours.line(), ours.exit_code)
         bad_yaml = _in_chain(err, yaml.MarkedYAMLError)

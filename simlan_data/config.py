@@ -7,6 +7,7 @@ references when ``OmegaConf.to_object`` builds these dataclasses. Every failure 
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from typing import Any, Optional
@@ -302,7 +303,7 @@ class AgentConfig:
     """
 
     type: str = "pallet_truck"
-    pose: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    pose: list[float] = field(default_factory=list)  # [x_m, y_m, yaw_rad]; empty: not spawned
     marker_id: Optional[int] = None  # noqa: UP045 - OmegaConf needs typing.Optional
     goals: list[list[float]] = field(default_factory=list)
     speed_mps: float = 1.0
@@ -328,12 +329,27 @@ class AgentConfig:
                 "DICT_5X5_1000 has ids 0..999",
                 "use the N of robot_agent_N",
             )
+        if len(self.pose) == 0:
+            # a scenario (or an override) set goals or a speed for an agent no spawn list has
+            raise ConfigError(
+                f"unknown agent {namespace}",
+                "config",
+                "something refers to it (a scenario's goals, an override) but the spawn list does not spawn it (no pose)",
+                "choose a spawn list that has it (e.g. agents=four_robots) or add it to yours with a type and pose",
+            )
         if len(self.pose) != 3:
             raise _bad(
                 f"agents.{namespace}.pose",
                 list(self.pose),
                 "expected [x_m, y_m, yaw_rad]",
                 "give three numbers",
+            )
+        if abs(self.pose[2]) > 2 * math.pi + 1e-6:
+            raise _bad(
+                f"agents.{namespace}.pose[2]",
+                self.pose[2],
+                "yaw_rad must be within [-2 pi, 2 pi] radians (this looks like degrees)",
+                f"give radians, e.g. {math.radians(self.pose[2]):.4f}",
             )
         for i, goal in enumerate(self.goals):
             if len(goal) != 2:

@@ -22,6 +22,7 @@ from .constants import METRICS_FILENAME, NS_PER_S
 from .errors import ConfigError
 from .evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
 from .evaluation.replay import REPLAY_ALGORITHMS, ReplayContext
+from .recording import schema
 from .recording.reader import RecordingReader
 from .recording.recover import recover
 
@@ -92,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.info:
             print(reader.summary())
             return 0
+        reader.require_topics(schema.REQUIRED_TOPICS)
         out: Path = args.out
         if out.resolve() == reader.path.resolve() or reader.path.resolve() in out.resolve().parents:
             raise ConfigError(

@@ -33,6 +33,7 @@ from .recording.reader import RecordingReader
 from .run_marker import RunMarker, write_running
 from .sim.scene import load_inputs
 from .sim.simulation import RunStats, Simulation
+from .validation import check_finite, check_references, config_error_from
 
 log = logging.getLogger("simlan_data.run")
 
@@ -41,6 +42,7 @@ register_configs()
 
 def to_config(cfg: DictConfig) -> Config:
     """Build the typed config; range and reference checks raise ConfigError."""
+    check_finite(cfg)
     try:
         obj = OmegaConf.to_object(cfg)
     except SimlanError:
@@ -51,8 +53,12 @@ def to_config(cfg: DictConfig) -> Config:
             if isinstance(cur, SimlanError):
                 raise cur from None
             cur = cur.__cause__ or cur.__context__
+        translated = config_error_from(err)
+        if translated is not None:
+            raise translated from None
         raise
     assert isinstance(obj, Config)
+    check_references(obj)
     return obj
 
 
@@ -96,6 +102,8 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
     try:
         stats = sim.run(bag, progress=on_progress)
     except SimlanError as err:
+        if not bag.exists():  # refused before recording anything (a spawn pose in a shelf...)
+            marker.unlink(missing_ok=True)
         if isinstance(err, ConfigError) or not recover_hint():
             raise
         raise RunError(

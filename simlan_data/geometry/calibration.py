@@ -27,6 +27,11 @@ MAX_CALIBRATION_BYTES = 1 << 20  # a calibration file is a few hundred bytes; re
 P_REL_TOL = 1e-4  # relative tolerance for P == K[R|t] (files store 17 significant digits)
 POSITION_TOL_M = 1e-3
 ROTATION_TOL = 1e-4
+# plausibility bounds: finite values outside them are typos or corruption, and would only fail
+# later (and less clearly) in projection and rendering
+MAX_FOCAL_PX = 1e6
+MAX_DISTORTION = 1e3
+MAX_DISTANCE_M = 1e4
 
 
 @dataclass(frozen=True)
@@ -70,8 +75,10 @@ def _read_storage(path: Path) -> cv2.FileStorage:
         )
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    except cv2.error as err:
-        msg = str(err).strip().splitlines()[-1] if str(err).strip() else "parse error"
+    except (cv2.error, SystemError) as err:
+        # OpenCV 5's binding reports some parse errors as SystemError with the cv2.error as cause
+        cause = err.__cause__ if isinstance(err, SystemError) and err.__cause__ is not None else err
+        msg = str(cause).strip().splitlines()[-1] if str(cause).strip() else "parse error"
         raise CalibrationError(
             "calibration file unreadable",
             str(path),
@@ -92,7 +99,7 @@ def _matrix(fs: cv2.FileStorage, key: str, shape: tuple[int, ...], path: Path) -
     try:
         node = fs.getNode(key)
         mat = None if node.empty() else node.mat()
-    except cv2.error:
+    except (cv2.error, SystemError):
         mat = None
     if mat is None:
         raise CalibrationError(
@@ -157,6 +164,30 @@ def load_calibration(camera_id: str | int, directory: Path | str | None = None) 
             str(ipath),
             f"not an upper-triangular camera matrix with fx, fy > 0 and K[2,2] = 1: {K.tolist()}",
             "restore the calibrated K",
+        )
+    if not (K[0, 0] <= MAX_FOCAL_PX and K[1, 1] <= MAX_FOCAL_PX and abs(K[0, 1]) <= MAX_FOCAL_PX) or not (
+        -width <= K[0, 2] <= 2 * width and -height <= K[1, 2] <= 2 * height
+    ):
+        raise CalibrationError(
+            "calibration K implausible",
+            str(ipath),
+            f"focal lengths must be within (0, {MAX_FOCAL_PX:g}] px and the principal point near the "
+            f"{width}x{height} image: {K.tolist()}",
+            "restore the calibrated K",
+        )
+    if np.abs(D).max() > MAX_DISTORTION:
+        raise CalibrationError(
+            "calibration D implausible",
+            str(ipath),
+            f"distortion coefficients beyond +-{MAX_DISTORTION:g}: {D.tolist()}",
+            "restore the calibrated D (k1 k2 p1 p2 k3)",
+        )
+    if np.abs(t).max() > MAX_DISTANCE_M:
+        raise CalibrationError(
+            "calibration t_vec implausible",
+            str(epath),
+            f"the camera would be over {MAX_DISTANCE_M:g} m from the origin: {t.tolist()}",
+            "restore the calibrated t_vec (metres)",
         )
     if not is_rotation_matrix(R, tol=ROTATION_TOL):
         err = float(np.abs(R.T @ R - np.eye(3)).max())

@@ -79,6 +79,8 @@ class RecordingReader:
             raise _bad(p, "no metadata.yaml (not a ROS 2 bag)", "point to a recording directory")
         self.path = p
         self._store: Typestore = schema.typestore()
+        if (p / "metadata.yaml").stat().st_size > MAX_METADATA_BYTES:  # before rosbags parses it
+            raise _bad(p, f"metadata.yaml is larger than {MAX_METADATA_BYTES} bytes")
         try:
             self._reader = Reader(p)
             self._reader.open()
