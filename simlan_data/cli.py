@@ -77,8 +77,13 @@ def fail(message: str, code: int) -> NoReturn:
     raise SystemExit(code)
 
 
-def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
+def run_cli(
+    main: Callable[[], object], *, debug: bool = False, started: Callable[[], bool] | None = None
+) -> None:
     """Run an entry point; turn errors into one ``error: ...`` line and exit code 2 or 1.
+
+    ``started()`` tells whether the work itself began: an unexpected error before that (inside
+    Hydra's composition) is a bad argument (2), after it a failed run (1).
 
     Hydra prints multi-line reports for config errors and exits 1; with HYDRA_FULL_ERROR set
     (by us, unless the user set it) it re-raises instead, and we print one line and exit 2.
@@ -122,6 +127,12 @@ def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
                     "conf/agents/four_robots.yaml and run with 'hydra.searchpath=[file://DIR]' agents=NAME"
                 )
             fail(f"invalid configuration: {msg}; {fix}", EXIT_BAD_INPUT)
+        if started is not None and not started():  # composing the config itself failed
+            fail(
+                f"invalid configuration in command line: {type(err).__name__}: {_first_line(str(err))}; "
+                "see --help for the valid groups and keys",
+                EXIT_BAD_INPUT,
+            )
         fail(
             f"run failed: {type(err).__name__}: {_first_line(str(err))} (rerun with --debug for the traceback)",
             EXIT_FAILED_RUN,

@@ -53,6 +53,8 @@ def _choice(field_name: str, value: str, choices: tuple[str, ...]) -> None:
 
 
 def _divides(field_name: str, rate_hz: float, physics_hz: int) -> None:
+    if not rate_hz > 0:
+        raise _bad(field_name, rate_hz, "must be > 0", f"use a divisor of world.physics_hz={physics_hz}")
     steps = physics_hz / rate_hz
     if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
         whole = [d for d in range(1, physics_hz + 1) if physics_hz % d == 0]
@@ -224,6 +226,7 @@ class RecordingConfig:
     compression: str = "zstd"
     compression_level: int = 2
     flush_period_s: float = 1.0
+    fsync: bool = False  # also force each flush to the disk: bounded loss on a power cut, not just a kill
     encode_threads: int = 2
 
     def __post_init__(self) -> None:

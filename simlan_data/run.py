@@ -164,8 +164,12 @@ def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_d
     print("\n".join(lines), flush=True)
 
 
+_STARTED: list[bool] = []  # set once Hydra has composed the config and called _app
+
+
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def _app(cfg: DictConfig) -> Any:
+    _STARTED.append(True)
     typed = to_config(cfg)
     run_dir = Path(HydraConfig.get().runtime.output_dir)
     config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
@@ -174,7 +178,7 @@ def _app(cfg: DictConfig) -> Any:
 
 
 def main() -> None:
-    run_cli(_app)
+    run_cli(_app, started=lambda: bool(_STARTED))
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import fields, is_dataclass
 from typing import Any
 
-from hydra.errors import HydraException, MissingConfigException, OverrideParseException
+from hydra.errors import MissingConfigException, OverrideParseException
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import (
     ConfigAttributeError,
@@ -273,9 +273,14 @@ def compose_config(overrides: Sequence[str]) -> Config:
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
             cfg = compose("config", overrides=list(overrides))
-    except (HydraException, OmegaConfBaseException, ValueError) as err:
+    except Exception as err:  # Hydra's composition fails in assorted ways on odd overrides
         translated = config_error_from(err)
         if translated is not None:
             raise translated from None
-        raise ConfigError("invalid configuration", "config", _first_line(err), "see --help") from None
+        raise ConfigError(
+            "invalid configuration",
+            "command line",
+            f"{type(err).__name__}: {_first_line(err) or 'composition failed'}",
+            "see --help for the valid groups and keys",
+        ) from None
     return to_config(cfg)

@@ -241,6 +241,11 @@ CONFIG_CASES = [
             r"invalid control_rate_hz=7.0 in config: the simulation steps at world.physics_hz=240",
         ),
         (
+            "control rate zero (found by fuzzing)",
+            ["control_rate_hz=0"],
+            r"invalid control_rate_hz=0.0 in config: must be > 0",
+        ),
+        (
             "render backend",
             ["render.backend=vulkan"],
             r"invalid render.backend='vulkan' in config: expected one of auto, egl, tiny",
@@ -376,6 +381,11 @@ CONFIG_CASES = [
             "new agent on the command line",
             ["+agents.robot_agent_5={type:jackal,pose:[0.0,0.0,0.0]}"],
             r"cannot add agent .*robot_agent_5 in command line: new agents go in a spawn list file",
+        ),
+        (
+            "group given a list (found by fuzzing)",
+            ["agents=[0]"],
+            r"invalid configuration in command line: TypeError: argument of type 'int' is not iterable",
         ),
         ("override syntax", ["x=[1,2"], r"invalid override in command line: .*; write KEY=VALUE"),
         (
@@ -890,6 +900,15 @@ RECORDING_CASES = [
             "corrupted chunk (CRC)",
             _flip_in_chunk,
             r"not a readable recording in .*: ReaderError while reading messages: Chunk checksum mismatch|zstd|ZstdError",
+        ),
+        (
+            "custom_data not a mapping (found by fuzzing)",
+            lambda b: (b / "metadata.yaml").write_text(
+                (b / "metadata.yaml")
+                .read_text()
+                .replace("simlan.format_version: '1.0'", "simlan.format_version; '1.0'")
+            ),
+            r"not a readable recording in .*: metadata.yaml custom_data is not a mapping of strings",
         ),
         (
             "no format version",

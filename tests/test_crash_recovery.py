@@ -287,6 +287,15 @@ def test_an_intact_recording_is_left_alone(tmp_path: Path) -> None:
     report = recover(tmp_path / "bag")
     assert not report.written and "complete and intact" in report.lines()[0]
     assert {p.name: p.read_bytes() for p in (tmp_path / "bag").iterdir()} == before
+    # a run that died after finishing its recording (while writing its report): only marked
+    run = tmp_path / "run"
+    _small_bag(run / "recording", seconds=1)
+    before = {p.name: p.read_bytes() for p in (run / "recording").iterdir()}
+    write_running(run, RunMarker(2**22 + 12345, socket.gethostname(), 1.0, 1.0))  # no such process
+    report = recover(run)
+    assert not report.written and "marked INCOMPLETE" in "\n".join(report.lines())
+    assert (run / "INCOMPLETE").is_file() and not (run / "RUNNING").exists()
+    assert {p.name: p.read_bytes() for p in (run / "recording").iterdir()} == before
 
 
 def test_recover_cli_and_replay_recover(tmp_path: Path) -> None:

@@ -286,6 +286,11 @@ def _read_metadata(path: Path) -> dict[str, Any]:
     info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
     if not isinstance(info, dict):
         raise _bad(path, "metadata.yaml lacks rosbag2_bagfile_information")
+    custom = info.get("custom_data")
+    if custom is not None and not (
+        isinstance(custom, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in custom.items())
+    ):
+        raise _bad(path, "metadata.yaml custom_data is not a mapping of strings")
     return info
 
 

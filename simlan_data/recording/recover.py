@@ -161,7 +161,14 @@ class RecoveryReport:
             return [
                 f"simlan_data: {self.bag} is complete and intact ({s.messages} messages in {s.chunks} chunks, "
                 f"{s.chunks_with_crc} with a CRC, all readable); nothing to recover"
-            ]
+            ] + (
+                [
+                    f"  run directory  marked {self.incomplete_marker.name}: the run stopped after finishing "
+                    "its recording (no metrics.json or report.md; `python -m simlan_data.replay RUN --out DIR` computes metrics)"
+                ]
+                if self.incomplete_marker is not None
+                else []
+            )
         out = [
             f"simlan_data: {'recovered' if self.written else 'checked (dry run, nothing written)'} {self.bag}"
         ]
@@ -448,6 +455,9 @@ def recover(path: Path | str, *, dry_run: bool = False, force: bool = False) -> 
     had_metadata = (bag / "metadata.yaml").is_file()
     probe = scan(mcap)
     report = RecoveryReport(bag, probe, had_metadata, marker)
+    if probe.intact and had_metadata and marker is not None and not dry_run:
+        # the recording was finished; the run died while writing metrics.json or report.md
+        report.incomplete_marker = mark_incomplete(run_dir, report.summary())
     if (probe.intact and had_metadata) or dry_run:
         return report
     if probe.messages == 0:
