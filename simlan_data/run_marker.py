@@ -73,7 +73,7 @@ def _read_yaml(path: Path) -> dict[str, Any]:
         if path.stat().st_size > MAX_MARKER_BYTES:
             return {}
         data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+    except (OSError, yaml.YAMLError, UnicodeDecodeError, RecursionError):
         return {}
     return data if isinstance(data, dict) else {}
 

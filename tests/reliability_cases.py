@@ -479,6 +479,11 @@ CALIBRATION_CASES = [
             r"calibration file too large in .*163.yaml: over 1048576 bytes",
         ),
         (
+            "flow nesting bomb (crashes OpenCV's parser)",
+            lambda r: (r / INTR).write_text("%YAML:1.0\n---\nK: " + "[" * 100_000),
+            r"calibration file unreadable in .*163.yaml: brackets nested 100000 deep \(more than 32; OpenCV's parser would crash\)",
+        ),
+        (
             "K missing",
             lambda r: _edit(r / INTR, "K: !!opencv-matrix", "Kx: !!opencv-matrix"),
             r"calibration key 'K' missing in .*intrinsic/163.yaml",
@@ -869,6 +874,18 @@ RECORDING_CASES = [
             "metadata not YAML",
             lambda b: (b / "metadata.yaml").write_text("{[: oops"),
             r"not a readable recording in .*: .*; run `python -m simlan_data.recover",
+        ),
+        (
+            "metadata nested too deeply",
+            lambda b: (b / "metadata.yaml").write_text("[" * 100_000),
+            r"not a readable recording in .*: metadata.yaml is nested too deeply",
+        ),
+        (
+            "metadata count not an integer (found by fuzzing)",
+            lambda b: (b / "metadata.yaml").write_text(
+                (b / "metadata.yaml").read_text().replace("message_count: 121", "message_count: 1:1", 1)
+            ),
+            r"not a readable recording in .*: metadata.yaml holds a message count or time that is not an integer",
         ),
         (
             "metadata without bag info",

@@ -76,14 +76,17 @@ def start_run(run_dir: Path, *overrides: str) -> subprocess.Popen[str]:
     """Start ``python -m simlan_data.run`` as users do, in the background."""
     env = {**os.environ}
     env.pop("HYDRA_FULL_ERROR", None)
-    return subprocess.Popen(
-        [sys.executable, "-m", "simlan_data.run", *overrides, f"hydra.run.dir={run_dir}"],
-        cwd=REPO,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    # stderr to a file beside the run (an unread pipe could fill up and block the child)
+    with (run_dir.parent / f"{run_dir.name}.stderr").open("w") as log:
+        return subprocess.Popen(
+            [sys.executable, "-m", "simlan_data.run", *overrides, f"hydra.run.dir={run_dir}"],
+            cwd=REPO,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=log,
+            text=True,
+        )
 
 
 def kill_when(

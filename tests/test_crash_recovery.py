@@ -33,7 +33,8 @@ from simlan_data.recording import messages as M
 from simlan_data.recording import schema
 from simlan_data.recording.codecs import encode_rgb
 from simlan_data.recording.reader import RecordingReader
-from simlan_data.recording.recover import recover, scan
+from simlan_data.recording.recover import recover
+from simlan_data.recording.salvage import scan
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.run_marker import RunMarker, write_running
 
@@ -266,6 +267,11 @@ def test_recover_refuses_what_it_cannot_or_must_not_repair(tmp_path: Path) -> No
     _small_bag(run / "recording", seconds=1)
     (run / "recording" / "metadata.yaml").unlink()
     sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)  # simlan_data.run"])
+    cmdline = Path(f"/proc/{sleeper.pid}/cmdline")
+    for _ in range(200):  # until the child has exec'd (before, /proc shows the parent's command)
+        if not cmdline.exists() or b"time.sleep" in cmdline.read_bytes():
+            break
+        time.sleep(0.01)
     try:
         write_running(run, RunMarker(sleeper.pid, socket.gethostname(), 10.0, 1.0))
         with pytest.raises(RecordingInputError, match=rf"still being written.*process {sleeper.pid}"):
@@ -345,3 +351,53 @@ def test_recovered_copy_in_a_fresh_directory_is_independent(tmp_path: Path) -> N
         tmp_path / "b" / "recording" / "recording.mcap"
     ).read_bytes()
     assert BytesIO((tmp_path / "a" / "recording" / "recording.mcap").read_bytes()).read(8) == b"\x89MCAP0\r\n"
+
+
+def _chunk_start(data: bytes, after: int) -> int:
+    """Offset of the first chunk record at or after ``after`` (skipping message indexes)."""
+    at = after
+    while data[at] != 0x06:
+        at += 9 + struct.unpack_from("<Q", data, at + 1)[0]
+    return at
+
+
+def test_a_damaged_record_length_in_a_finished_file_costs_only_that_chunk(tmp_path: Path) -> None:
+    """Reading front to back stops at a damaged length; the summary's chunk index resumes it."""
+    _small_bag(tmp_path / "bag", seconds=4)
+    bag = tmp_path / "bag"
+    reference = messages_in_file_order(bag)
+    ends = _chunk_ends(bag / "bag.mcap")
+    data = bytearray((bag / "bag.mcap").read_bytes())
+    third = _chunk_start(data, ends[1][0])
+    struct.pack_into("<Q", data, third + 1, 2**40)  # the 3rd chunk claims a terabyte
+    (bag / "bag.mcap").write_bytes(bytes(data))
+    report = recover(bag)
+    # the index knows the chunk's true length, and its CRC shows the contents are good: all kept
+    assert report.salvage.resumed_from_index == len(ends) - 2 and report.salvage.damaged == []
+    assert messages_in_file_order(bag) == reference
+    assert "later chunks read through the summary's chunk index" in "\n".join(report.lines())
+    # damage inside the same chunk as well: only that chunk is lost
+    _small_bag(tmp_path / "bag2", seconds=4)
+    bag = tmp_path / "bag2"
+    data = bytearray((bag / "bag2.mcap").read_bytes())
+    struct.pack_into("<Q", data, third + 1, 2**40)
+    data[third + 200] ^= 0xFF
+    (bag / "bag2.mcap").write_bytes(bytes(data))
+    report = recover(bag)
+    assert [d.offset for d in report.salvage.damaged] == [third]
+    n = [k for _, k in ends]
+    assert messages_in_file_order(bag) == reference[: n[0] + n[1]] + reference[n[0] + n[1] + n[2] :]
+
+
+def test_a_damaged_metadata_yaml_is_rebuilt_from_the_file(tmp_path: Path) -> None:
+    _small_bag(tmp_path / "bag", seconds=2)
+    bag = tmp_path / "bag"
+    reference = messages_in_file_order(bag)
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {version: 9, message_count: 3}\n")
+    with pytest.raises(RecordingInputError, match="not a readable recording"):
+        RecordingReader(bag, check_format=False)
+    report = recover(bag)
+    assert report.written and (bag / "metadata.yaml.damaged").is_file()
+    assert messages_in_file_order(bag) == reference
+    with RecordingReader(bag, check_format=False) as r:
+        assert r.message_count == len(reference) and r.recovered

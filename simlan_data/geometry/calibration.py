@@ -11,6 +11,7 @@ disagree with K[R|t] and -R^T t the loader reports the file (SIMLAN's 500-503 ca
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,6 +33,9 @@ ROTATION_TOL = 1e-4
 MAX_FOCAL_PX = 1e6
 MAX_DISTORTION = 1e3
 MAX_DISTANCE_M = 1e4
+# OpenCV's YAML parser recurses per [ or { and crashes the process (segfault, measured at 50000
+# levels); SIMLAN's files nest 1 deep
+MAX_FLOW_DEPTH = 32
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,14 @@ def _read_storage(path: Path) -> cv2.FileStorage:
             f"not UTF-8 text ({err.reason})",
             "point to an OpenCV FileStorage YAML file",
         ) from err
+    depth = _flow_depth(text)
+    if depth > MAX_FLOW_DEPTH:
+        raise CalibrationError(
+            "calibration file unreadable",
+            str(path),
+            f"brackets nested {depth} deep (more than {MAX_FLOW_DEPTH}; OpenCV's parser would crash)",
+            "point to SIMLAN's calibration YAML",
+        )
     if not text.lstrip().startswith("%YAML"):
         raise CalibrationError(
             "calibration file unreadable",
@@ -93,6 +105,15 @@ def _read_storage(path: Path) -> cv2.FileStorage:
             "fix the YAML or restore the original file",
         )
     return fs
+
+
+def _flow_depth(text: str) -> int:
+    """Deepest nesting of [ and { in ``text`` (YAML flow collections)."""
+    depth = deepest = 0
+    for ch in re.sub(r"[^\[\]{}]", "", text):
+        depth = depth + 1 if ch in "[{" else max(0, depth - 1)
+        deepest = max(deepest, depth)
+    return deepest
 
 
 def _matrix(fs: cv2.FileStorage, key: str, shape: tuple[int, ...], path: Path) -> np.ndarray:

@@ -10,7 +10,6 @@ from typing import Any
 
 import yaml
 from rosbags.rosbag2 import Reader
-from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
@@ -79,20 +78,20 @@ class RecordingReader:
             raise _bad(p, "no metadata.yaml (not a ROS 2 bag)", "point to a recording directory")
         self.path = p
         self._store: Typestore = schema.typestore()
-        if (p / "metadata.yaml").stat().st_size > MAX_METADATA_BYTES:  # before rosbags parses it
-            raise _bad(p, f"metadata.yaml is larger than {MAX_METADATA_BYTES} bytes")
+        self._metadata = _read_metadata(p)  # size and fields checked before rosbags trusts them
         try:
             self._reader = Reader(p)
             self._reader.open()
-        except (ReaderError, OSError, ValueError, KeyError, TypeError, UnicodeDecodeError) as err:
-            raise _bad(
-                p, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else 'unreadable'}"
-            ) from err
+            # rosbags parses metadata.yaml itself (YAML 1.2, where PyYAML reads 1.1) and trusts it
+            counts = [c.msgcount for c in self._reader.connections] + [
+                self._reader.message_count,
+                self._reader.start_time,
+                self._reader.end_time,
+            ]
         except Exception as err:  # rosbags raises assorted errors on corrupt input
-            raise _bad(
-                p, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else 'unreadable'}"
-            ) from err
-        self._metadata = _read_metadata(p)
+            raise _bad(p, f"{type(err).__name__}: {_first(err)}") from err
+        if not all(isinstance(n, int) and not isinstance(n, bool) for n in counts):
+            raise _bad(p, "metadata.yaml holds a message count or time that is not an integer")
         self._register_bag_types()
         self.format_version = self.custom_data.get(METADATA_KEY_FORMAT, "")
         if check_format:
@@ -283,6 +282,8 @@ def _read_metadata(path: Path) -> dict[str, Any]:
         data = yaml.safe_load(meta.read_text())
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise _bad(path, f"metadata.yaml unreadable: {_first(err)}") from err
+    except RecursionError:
+        raise _bad(path, "metadata.yaml is nested too deeply") from None
     info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
     if not isinstance(info, dict):
         raise _bad(path, "metadata.yaml lacks rosbag2_bagfile_information")
@@ -291,7 +292,40 @@ def _read_metadata(path: Path) -> dict[str, Any]:
         isinstance(custom, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in custom.items())
     ):
         raise _bad(path, "metadata.yaml custom_data is not a mapping of strings")
+    _check_metadata_fields(path, info)
     return info
+
+
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _check_metadata_fields(path: Path, info: dict[str, Any]) -> None:
+    """The fields rosbags takes on trust: counts and times are integers, topics have names and types."""
+    for key, sub in (
+        ("message_count", None),
+        ("duration", "nanoseconds"),
+        ("starting_time", "nanoseconds_since_epoch"),
+    ):
+        value = info.get(key)
+        if sub is not None:
+            value = value.get(sub) if isinstance(value, dict) else None
+        if not _is_count(value):
+            raise _bad(path, f"metadata.yaml {key}{'.' + sub if sub else ''} is not a non-negative integer")
+    topics = info.get("topics_with_message_count")
+    if not isinstance(topics, list):
+        raise _bad(path, "metadata.yaml topics_with_message_count is not a list")
+    for i, entry in enumerate(topics):
+        meta = entry.get("topic_metadata") if isinstance(entry, dict) else None
+        if not (
+            isinstance(meta, dict)
+            and isinstance(meta.get("name"), str)
+            and isinstance(meta.get("type"), str)
+            and _is_count(entry.get("message_count"))
+        ):
+            raise _bad(
+                path, f"metadata.yaml topics_with_message_count[{i}] lacks a name, type or integer count"
+            )
 
 
 def _first(err: BaseException) -> str:

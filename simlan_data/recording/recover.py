@@ -1,15 +1,14 @@
 """Recover a recording whose run crashed: keep every complete chunk, rebuild summary and metadata.
 
 A killed run leaves ``recording.mcap`` without its summary section and the bag without
-``metadata.yaml``. The file is read front to back with the ``mcap`` library's streaming reader
-(no seeking, no trust in the missing summary)::
+``metadata.yaml``::
 
-    recording.mcap --StreamReader--> Header, Chunk, MessageIndex, ..., Chunk, <partial chunk>
-        each Chunk: size bounds -> zstd (bounded) -> CRC32 -> Schema/Channel/Message records
-        a record cut short or unreadable ends the readable part; a chunk failing its CRC is skipped
-    --> RecordingWriter (a new bag beside the old: same topics, message bytes, log times)
-    --> verify with RecordingReader --> commit: original kept as recording.mcap.damaged,
-        new file renamed over it, metadata.yaml renamed in last (the commit point)
+    recording.mcap --salvage.scan (streaming, checked)--> schemas, channels, messages
+        --> RecordingWriter: a new bag under recording/.recover/ (same topics, message bytes,
+            log times; chunks with CRCs, summary, metadata.yaml v9 with custom_data)
+        --> read back with RecordingReader (message count must match)
+        --> commit by renames: the original kept as recording.mcap.damaged (a hard link), the
+            new file over it, metadata.yaml last (the commit point: readers need it)
 
 A recording that is complete and intact is left alone. The run directory's ``RUNNING`` marker
 (which says how far the simulated clock got) becomes ``INCOMPLETE``, and the recovered
@@ -21,87 +20,23 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-import struct
-import sys
-import zlib
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import yaml
-from mcap.exceptions import EndOfFile, InvalidMagic, McapError
-from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
-
-if sys.version_info >= (3, 14):
-    from compression import zstd
-else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
-    from backports import zstd
+from mcap.records import Channel, Message, Schema
 
 from ..constants import DAMAGED_SUFFIX, NS_PER_S, RECORDING_DIRNAME
 from ..errors import RecordingError, RecordingInputError
 from ..run_marker import RunMarker, mark_incomplete, read_running, writer_alive
 from . import schema
 from .reader import METADATA_KEY_FORMAT, RecordingReader
+from .salvage import Salvage, scan
 from .writer import RecordingWriter
 
-MAX_CHUNK_BYTES = (
-    1 << 30
-)  # an uncompressed chunk larger than this is not ours (rosbags: ~1 MiB + one message)
 WORK_DIRNAME = ".recover"
 RECOVERED_KEY = "simlan.recovered"
-_PARSE_ERRORS = (
-    McapError,
-    struct.error,
-    ValueError,
-    UnicodeDecodeError,
-    EOFError,
-    OverflowError,
-    MemoryError,
-)
-
-
-class _BadChunkError(Exception):
-    """A chunk whose records cannot be trusted (the reason is the message)."""
-
-
-@dataclass(frozen=True)
-class ChunkDamage:
-    """A chunk that was skipped: where, why, and the time range its header claims."""
-
-    offset: int
-    why: str
-    start_ns: int
-    end_ns: int
-
-
-@dataclass
-class Salvage:
-    """What one pass over a (possibly damaged) MCAP file found readable."""
-
-    mcap: Path
-    size: int
-    complete: bool = False  # reached the end of the data section (the summary follows)
-    readable_bytes: int = 0  # the file up to here consists of whole records
-    stop_reason: str = ""  # why reading stopped before the end, if it did
-    tail_chunk: tuple[int, int] | None = None  # time range of an unfinished chunk at the end
-    chunks: int = 0
-    chunks_with_crc: int = 0
-    damaged: list[ChunkDamage] = field(default_factory=list)
-    counts: dict[str, int] = field(default_factory=dict)  # topic -> messages recovered
-    first_ns: int | None = None
-    last_ns: int | None = None
-    run_info: Any = None
-    config: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def messages(self) -> int:
-        return sum(self.counts.values())
-
-    @property
-    def intact(self) -> bool:
-        return self.complete and not self.damaged
 
 
 @dataclass
@@ -148,6 +83,7 @@ class RecoveryReport:
             "chunks_recovered": s.chunks,
             "chunks_damaged": len(s.damaged),
             "unreadable_bytes": s.size - s.readable_bytes,
+            "chunks_resumed_from_index": s.resumed_from_index,
             "topics": dict(sorted(s.counts.items())),
             "damaged_copy": str(self.damaged_copy) if self.damaged_copy else None,
         }
@@ -174,9 +110,16 @@ class RecoveryReport:
         ]
         tail = s.size - s.readable_bytes
         what = f"{s.readable_bytes / mib:.1f} MiB in whole records"
-        if tail:
+        if s.resumed_from_index:
+            what += (
+                f", then a damaged record ({s.stop_reason}); {s.resumed_from_index} later chunks read "
+                "through the summary's chunk index"
+            )
+        elif tail:
             why = "an unfinished chunk" if s.tail_chunk is not None else s.stop_reason or "unreadable"
             what += f", the last {tail / 1024:.1f} KiB unreadable ({why})"
+        elif s.complete and not self.had_metadata:
+            what += " (complete; metadata.yaml missing, unreadable or disagreeing)"
         out.append(f"  file           {s.mcap.name}: {what}")
         span = f"{(s.first_ns or 0) / NS_PER_S:.3f} .. {self.recovered_until_s:.3f} s" if s.messages else "-"
         out.append(
@@ -212,173 +155,6 @@ class RecoveryReport:
         if self.written:
             out.append(f"  next           python -m simlan_data.replay {self.bag} --info")
         return out
-
-
-# --------------------------------------------------------------------------------- reading
-def _records(f: BinaryIO, size: int) -> Iterator[Any]:
-    """Records of the file in order; no record may claim more bytes than the file has."""
-    return StreamReader(f, emit_chunks=True, record_size_limit=max(size, 1)).records
-
-
-def open_chunk(chunk: Chunk) -> list[Any]:
-    """The Schema/Channel/Message records of a chunk, after size, decompression and CRC checks.
-
-    Raises:
-        _BadChunkError: the chunk cannot be trusted.
-    """
-    size = chunk.uncompressed_size
-    if size > MAX_CHUNK_BYTES:
-        raise _BadChunkError(f"claims {size} bytes uncompressed (limit {MAX_CHUNK_BYTES})")
-    if chunk.compression == "zstd":
-        dec = zstd.ZstdDecompressor()
-        try:
-            raw = dec.decompress(chunk.data, max_length=size)
-        except (zstd.ZstdError, ValueError, MemoryError) as err:
-            raise _BadChunkError(f"zstd: {err}") from None
-        if not dec.eof:
-            raise _BadChunkError("zstd data does not end where the chunk says")
-    elif chunk.compression == "":
-        raw = chunk.data
-    else:
-        raise _BadChunkError(f"unsupported compression {chunk.compression!r}")
-    if len(raw) != size:
-        raise _BadChunkError(f"{len(raw)} bytes uncompressed, header says {size}")
-    if chunk.uncompressed_crc and zlib.crc32(raw) != chunk.uncompressed_crc:
-        raise _BadChunkError("CRC mismatch")
-    plain = Chunk(
-        compression="",
-        data=raw,
-        message_end_time=chunk.message_end_time,
-        message_start_time=chunk.message_start_time,
-        uncompressed_crc=0,
-        uncompressed_size=size,
-    )
-    try:
-        return breakup_chunk(plain)
-    except _PARSE_ERRORS as err:
-        raise _BadChunkError(f"records unreadable ({type(err).__name__})") from None
-
-
-def _tail_chunk_times(f: BinaryIO, offset: int, size: int) -> tuple[int, int] | None:
-    """The time range in the header of a chunk cut short at ``offset``, if one starts there."""
-    if size - offset < 1 + 8 + 16:
-        return None
-    f.seek(offset)
-    head = f.read(25)
-    if head[0] != 0x06:
-        return None
-    start, end = struct.unpack("<QQ", head[9:25])
-    return (start, end) if start <= end else None
-
-
-def scan(
-    mcap: Path,
-    *,
-    on_channel: Callable[[Channel, Schema], None] | None = None,
-    on_message: Callable[[Channel, Message], None] | None = None,
-) -> Salvage:
-    """Read ``mcap`` front to back and report what is readable, calling back for each record.
-
-    Raises:
-        RecordingInputError: the file is not an MCAP file at all.
-    """
-    size = mcap.stat().st_size
-    out = Salvage(mcap, size)
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    store = schema.typestore()
-
-    def take(rec: Any) -> None:
-        if isinstance(rec, Schema):
-            schemas.setdefault(rec.id, rec)
-        elif isinstance(rec, Channel):
-            if rec.id not in channels and rec.schema_id in schemas:
-                channels[rec.id] = rec
-                if on_channel is not None:
-                    on_channel(rec, schemas[rec.schema_id])
-        elif isinstance(rec, Message):
-            ch = channels.get(rec.channel_id)
-            if ch is None:
-                return
-            out.counts[ch.topic] = out.counts.get(ch.topic, 0) + 1
-            out.first_ns = rec.log_time if out.first_ns is None else min(out.first_ns, rec.log_time)
-            out.last_ns = rec.log_time if out.last_ns is None else max(out.last_ns, rec.log_time)
-            if ch.topic in (schema.RUN_INFO, schema.CONFIG) and out.counts[ch.topic] == 1:
-                _provenance(out, ch.topic, schemas[ch.schema_id].name, rec.data, store)
-            if on_message is not None:
-                on_message(ch, rec)
-
-    with mcap.open("rb") as f:
-        records = _records(f, size)
-        try:
-            for rec in records:
-                pos = f.tell()
-                if isinstance(rec, Chunk):
-                    try:
-                        inner = open_chunk(rec)
-                        _check_chunk(inner, rec, schemas, channels)
-                    except _BadChunkError as err:
-                        out.damaged.append(
-                            ChunkDamage(
-                                out.readable_bytes, str(err), rec.message_start_time, rec.message_end_time
-                            )
-                        )
-                    else:
-                        for r in inner:
-                            take(r)
-                        out.chunks += 1
-                        out.chunks_with_crc += int(rec.uncompressed_crc != 0)
-                elif isinstance(rec, (DataEnd, Footer)):
-                    out.complete = True
-                    out.readable_bytes = size
-                    break
-                else:
-                    take(rec)
-                out.readable_bytes = pos
-        except InvalidMagic:
-            raise RecordingInputError(
-                "not an MCAP file",
-                str(mcap),
-                "no MCAP magic at its start",
-                "point to a simlan_data recording",
-            ) from None
-        except EndOfFile:
-            out.stop_reason = "the file ends inside a record" if out.readable_bytes else "the file is empty"
-            out.tail_chunk = _tail_chunk_times(f, out.readable_bytes, size)
-        except _PARSE_ERRORS as err:
-            first = str(err).strip().splitlines()[0] if str(err).strip() else ""
-            out.stop_reason = f"{type(err).__name__}: {first}" if first else type(err).__name__
-            out.tail_chunk = _tail_chunk_times(f, out.readable_bytes, size)
-    return out
-
-
-def _check_chunk(
-    inner: list[Any], chunk: Chunk, schemas: dict[int, Schema], channels: dict[int, Channel]
-) -> None:
-    """Refuse a chunk (without a CRC) whose records contradict themselves or its header."""
-    known_schemas = set(schemas) | {r.id for r in inner if isinstance(r, Schema)}
-    known_channels = set(channels) | {
-        r.id for r in inner if isinstance(r, Channel) and r.schema_id in known_schemas
-    }
-    for r in inner:
-        if isinstance(r, Message) and (
-            r.channel_id not in known_channels
-            or not chunk.message_start_time <= r.log_time <= chunk.message_end_time
-        ):
-            raise _BadChunkError("a message contradicts the chunk header")
-
-
-def _provenance(out: Salvage, topic: str, msgtype: str, data: bytes, store: Any) -> None:
-    try:
-        msg = store.deserialize_cdr(data, msgtype)
-    except Exception:  # a damaged provenance message only costs the custom_data
-        return
-    if topic == schema.RUN_INFO:
-        out.run_info = msg
-    else:
-        with contextlib.suppress(yaml.YAMLError, AttributeError):
-            cfg = yaml.safe_load(msg.data)
-            out.config = cfg if isinstance(cfg, dict) else {}
 
 
 # --------------------------------------------------------------------------------- writing
@@ -454,6 +230,7 @@ def recover(path: Path | str, *, dry_run: bool = False, force: bool = False) -> 
     mcap = _find_mcap(bag)
     had_metadata = (bag / "metadata.yaml").is_file()
     probe = scan(mcap)
+    had_metadata = had_metadata and _metadata_agrees(bag, probe)  # else it is rebuilt too
     report = RecoveryReport(bag, probe, had_metadata, marker)
     if probe.intact and had_metadata and marker is not None and not dry_run:
         # the recording was finished; the run died while writing metrics.json or report.md
@@ -484,7 +261,7 @@ def recover(path: Path | str, *, dry_run: bool = False, force: bool = False) -> 
         os.link(mcap, damaged)
     except OSError:
         shutil.copy2(mcap, damaged)
-    if had_metadata:
+    if (bag / "metadata.yaml").exists():  # damaged or disagreeing: kept beside the new one
         os.replace(bag / "metadata.yaml", bag / f"metadata.yaml{DAMAGED_SUFFIX}")
     os.replace(new_mcap, bag / new_mcap.name)
     if mcap.name != new_mcap.name:
@@ -496,6 +273,18 @@ def recover(path: Path | str, *, dry_run: bool = False, force: bool = False) -> 
     if marker is not None:
         report.incomplete_marker = mark_incomplete(run_dir, report.summary())
     return report
+
+
+def _metadata_agrees(bag: Path, probe: Salvage) -> bool:
+    """True if the bag opens with its metadata.yaml and that agrees with the file's messages."""
+    try:
+        with RecordingReader(bag, check_format=False) as reader:
+            return (
+                reader.message_count == probe.messages
+                and {t.name: t.count for t in reader.topics.values()} == probe.counts
+            )
+    except RecordingError:
+        return False
 
 
 def _rewrite(bag: Path, mcap: Path) -> Salvage:

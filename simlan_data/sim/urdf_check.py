@@ -77,17 +77,17 @@ def check_urdf(kind: AgentType, urdf_dir: Path = URDF_DIR) -> Path:
         )
     if kind.drive == "diff":
         for name in kind.wheel_joints:
-            joint = joints.get(name)
-            if joint is None:
+            wheel = joints.get(name)
+            if wheel is None:
                 raise bad(
                     f"URDF lacks wheel joint '{name}'",
                     f"a {kind.drive}-drive robot is driven through {' and '.join(kind.wheel_joints)}",
                     "add the joint or restore the packaged URDF",
                 )
-            if joint.get("type") not in WHEEL_JOINT_TYPES:
+            if wheel.get("type") not in WHEEL_JOINT_TYPES:
                 raise bad(
                     f"URDF wheel joint '{name}' cannot turn",
-                    f"its type is {joint.get('type')!r}",
+                    f"its type is {wheel.get('type')!r}",
                     f"make it one of {', '.join(WHEEL_JOINT_TYPES)}",
                 )
         missing = [c for c in kind.caster_links if c not in links]
