@@ -137,7 +137,8 @@ class RecoveryReport:
         if self.reached_s is not None:
             gap = max(0.0, self.reached_s - self.recovered_until_s)
             lost.append(
-                f"{gap:.3f} s of data before the crash (the run had simulated {self.reached_s:.3f} s)"
+                f"{gap:.3f} s of data before {self.reached_s:.3f} s, the last camera tick the run "
+                "reported (it crashed before the next)"
             )
         if self.intended_s is not None:
             end = self.reached_s if self.reached_s is not None else self.recovered_until_s
