@@ -38,363 +38,89 @@ class Case:
 
 
 # ------------------------------------------------------------------------------------ config
+# fmt: off
 CONFIG_CASES = [
     Case(*c)
     for c in [
-        (
-            "duration unit suffix",
-            ["duration_s=60s"],
-            r"invalid duration_s='60s' in config: expected Float, got str; units are part of the key's name \(duration_s: seconds\): write duration_s=60",
-        ),
+        ("duration unit suffix", ["duration_s=60s"], r"invalid duration_s='60s' in config: expected Float, got str; units are part of the key's name \(duration_s: seconds\): write duration_s=60"),
         ("duration not a number", ["duration_s=abc"], r"invalid duration_s='abc' in config: expected Float"),
-        (
-            "duration negative",
-            ["duration_s=-5"],
-            r"invalid duration_s=-5.0 in config: must be within \(0, 86400\]",
-        ),
-        (
-            "duration nan",
-            ["duration_s=nan"],
-            r"invalid duration_s=nan in config: not a finite number; give a number in seconds",
-        ),
+        ("duration negative", ["duration_s=-5"], r"invalid duration_s=-5.0 in config: must be within \(0, 86400\]"),
+        ("duration nan", ["duration_s=nan"], r"invalid duration_s=nan in config: not a finite number; give a number in seconds"),
         ("duration inf", ["duration_s=inf"], r"invalid duration_s=inf in config: not a finite number"),
         ("seed negative", ["seed=-1"], r"invalid seed=-1 in config: must be within 0..2\^32-1"),
-        (
-            "seed not whole",
-            ["seed=1.5"],
-            r"invalid seed='1.5' in config: expected Integer, got float; give a whole number",
-        ),
-        (
-            "unknown top-level key",
-            ["no_such_key=1"],
-            r"unknown key no_such_key in config: Config has no such key",
-        ),
-        (
-            "misspelt key",
-            ["recording.flush_period=2"],
-            r"unknown key recording.flush_period in config: RecordingConfig has no such key; did you mean recording.flush_period_s\?",
-        ),
-        (
-            "flush period zero",
-            ["recording.flush_period_s=0"],
-            r"invalid recording.flush_period_s=0.0 in config: must be > 0",
-        ),
-        (
-            "flush period negative",
-            ["recording.flush_period_s=-1"],
-            r"invalid recording.flush_period_s=-1.0 in config: must be > 0",
-        ),
-        (
-            "unknown group option",
-            ["cameras=gpsss"],
-            r"unknown cameras=gpsss in config: no such option in conf/cameras/; did you mean gpss\? options: gpss, gpss_all",
-        ),
+        ("seed not whole", ["seed=1.5"], r"invalid seed='1.5' in config: expected Integer, got float; give a whole number"),
+        ("unknown top-level key", ["no_such_key=1"], r"unknown key no_such_key in config: Config has no such key"),
+        ("misspelt key", ["recording.flush_period=2"], r"unknown key recording.flush_period in config: RecordingConfig has no such key; did you mean recording.flush_period_s\?"),
+        ("flush period zero", ["recording.flush_period_s=0"], r"invalid recording.flush_period_s=0.0 in config: must be > 0"),
+        ("flush period negative", ["recording.flush_period_s=-1"], r"invalid recording.flush_period_s=-1.0 in config: must be > 0"),
+        ("unknown group option", ["cameras=gpsss"], r"unknown cameras=gpsss in config: no such option in conf/cameras/; did you mean gpss\? options: gpss, gpss_all"),
         ("no cameras", ["cameras.ids=[]"], r"invalid cameras.ids=\[\] in config: no camera selected"),
-        (
-            "camera twice",
-            ["cameras.ids=[160,160]"],
-            r"invalid cameras.ids=\[160, 160\] in config: an id appears twice",
-        ),
-        (
-            "unknown camera",
-            ["cameras.ids=[999]"],
-            r"unknown camera id 999 in cameras.ids in the packaged calibrations",
-        ),
-        (
-            "camera id not a number",
-            ["cameras.ids=[abc]"],
-            r"invalid cameras.ids\[0\]='abc' in config: expected Integer",
-        ),
-        (
-            "width not a number",
-            ["cameras.width=abc"],
-            r"invalid cameras.width='abc' in config: expected Integer",
-        ),
-        (
-            "width too small",
-            ["cameras.width=10"],
-            r"invalid cameras.width x height='10x540' in config: must be within 16x16",
-        ),
-        (
-            "aspect ratio",
-            ["cameras.width=1000"],
-            r"invalid cameras.width x height=1000x540 in config: camera 160 is 3840x2160",
-        ),
-        (
-            "camera rate not a divisor",
-            ["cameras.rate_hz=7"],
-            r"invalid cameras.rate_hz=7.0 in config: the simulation steps at world.physics_hz=240",
-        ),
-        (
-            "camera rate with unit",
-            ["cameras.rate_hz=5Hz"],
-            r"invalid cameras.rate_hz='5Hz' in config: expected Float, got str; units are part of the key's name \(rate_hz: hertz\): write cameras.rate_hz=5",
-        ),
-        (
-            "near beyond far",
-            ["cameras.near_m=200"],
-            r"invalid cameras.near_m/far_m=\(200.0, 100.0\) in config: need 0 < near_m < far_m",
-        ),
-        (
-            "unknown stream",
-            ["cameras.streams=[rgb,thermal]"],
-            r"invalid cameras.streams\[\]='thermal' in config: expected one of rgb, depth, semantic",
-        ),
-        (
-            "no rgb stream",
-            ["cameras.streams=[depth]"],
-            r"invalid cameras.streams=\['depth'\] in config: rgb is required",
-        ),
-        (
-            "calibration check choice",
-            ["cameras.calibration_check=maybe"],
-            r"invalid cameras.calibration_check='maybe' in config: expected one of warn, error",
-        ),
-        (
-            "calibration dir missing",
-            ["cameras.calibration_dir=/nonexistent/calib"],
-            r"unknown camera id 160 in cameras.ids in /nonexistent/calib: no intrinsic/extrinsic calibration pair with that id; use one of \(none found\)",
-        ),
-        (
-            "fidelity",
-            ["world.fidelity=ultra"],
-            r"invalid world.fidelity='ultra' in config: expected one of empty, light, medium, default",
-        ),
-        (
-            "physics rate not whole",
-            ["world.physics_hz=240.5"],
-            r"invalid world.physics_hz='240.5' in config: expected Integer, got float",
-        ),
-        (
-            "physics rate range",
-            ["world.physics_hz=10"],
-            r"invalid world.physics_hz=10 in config: must be within 60..2000 Hz",
-        ),
-        (
-            "gravity negative",
-            ["world.gravity_mps2=-9.81"],
-            r"invalid world.gravity_mps2=-9.81 in config: must be within 0..100 m/s\^2",
-        ),
-        (
-            "settle range",
-            ["world.settle_s=100"],
-            r"invalid world.settle_s=100.0 in config: must be within 0..60 s",
-        ),
-        (
-            "layout missing",
-            ["world.layout=missing.csv"],
-            r"layout file missing in .*missing.csv: no such file",
-        ),
-        (
-            "restitution range",
-            ["world.physics.box.restitution=2"],
-            r"invalid world.physics.\*.restitution=2.0 in config: must be in \[0, 1\]",
-        ),
-        (
-            "negative mass",
-            ["world.physics.box.mass_kg=-1"],
-            r"invalid world.physics.\*.mass_kg=-1.0 in config: must be >= 0",
-        ),
-        (
-            "rgb encoding",
-            ["recording.rgb_encoding=webp"],
-            r"invalid recording.rgb_encoding='webp' in config: expected one of jpeg, png, raw",
-        ),
-        (
-            "jpeg quality",
-            ["recording.jpeg_quality=0"],
-            r"invalid recording.jpeg_quality=0 in config: must be within 1..100",
-        ),
-        (
-            "jpeg quality list",
-            ["recording.jpeg_quality=[1]"],
-            r"invalid recording.jpeg_quality='\[1\]' in config: expected Integer, got list",
-        ),
-        (
-            "chunk compression",
-            ["recording.compression=lz4"],
-            r"invalid recording.compression='lz4' in config: expected one of zstd, none",
-        ),
-        (
-            "zstd level",
-            ["recording.compression_level=50"],
-            r"invalid recording.compression_level=50 in config: zstd levels are -7..22",
-        ),
-        (
-            "depth rate",
-            ["recording.depth_rate_hz=2"],
-            r"invalid recording.depth_rate_hz=2.0 in config: must divide the camera rate",
-        ),
-        (
-            "ground truth rate",
-            ["recording.ground_truth_rate_hz=10"],
-            r"invalid recording.ground_truth_rate_hz=10.0 in config: ground truth must be recorded at 50 Hz or more",
-        ),
-        (
-            "encode threads",
-            ["recording.encode_threads=100"],
-            r"invalid recording.encode_threads=100 in config: must be within 0..16",
-        ),
-        (
-            "control rate",
-            ["control_rate_hz=7"],
-            r"invalid control_rate_hz=7.0 in config: the simulation steps at world.physics_hz=240",
-        ),
-        (
-            "control rate zero (found by fuzzing)",
-            ["control_rate_hz=0"],
-            r"invalid control_rate_hz=0.0 in config: must be > 0",
-        ),
-        (
-            "render backend",
-            ["render.backend=vulkan"],
-            r"invalid render.backend='vulkan' in config: expected one of auto, egl, tiny",
-        ),
-        (
-            "localization method",
-            ["localization.method=magic"],
-            r"invalid localization.method='magic' in config: expected one of ground, pnp",
-        ),
-        (
-            "localization source",
-            ["localization.source=gps"],
-            r"invalid localization.source='gps' in config: expected one of camera, ground_truth",
-        ),
-        (
-            "bias nan",
-            ["localization.bias_m=[nan,0]"],
-            r"invalid localization.bias_m\[0\]=nan in config: not a finite number; give a number in metres",
-        ),
-        (
-            "bias length",
-            ["localization.bias_m=[1,2,3]"],
-            r"invalid localization.bias_m=\[1.0, 2.0, 3.0\] in config: expected \[x_m, y_m\]",
-        ),
-        (
-            "timeouts order",
-            ["localization.lost_timeout_s=0.1"],
-            r"invalid localization.lost_timeout_s=0.1 in config: must be >= localization.unobserved_timeout_s",
-        ),
-        (
-            "delay in ms",
-            ["localization.processing_delay_s=100"],
-            r"invalid localization.processing_delay_s=100.0 in config: must be within 0..5 s",
-        ),
-        (
-            "grid resolution",
-            ["navigation.resolution_m=5"],
-            r"invalid navigation.resolution_m=5.0 in config: must be within 0.02..0.5 m",
-        ),
-        (
-            "navigation map",
-            ["navigation.map=google"],
-            r"invalid navigation.map='google' in config: expected one of world, simlan",
-        ),
-        (
-            "clearance negative",
-            ["navigation.clearance_m=-1"],
-            r"invalid navigation.clearance_m=-1.0 in config: must be > 0",
-        ),
-        (
-            "birdseye rate",
-            ["birdseye.rate_hz=3"],
-            r"invalid birdseye.rate_hz=3.0 in config: must divide the camera rate",
-        ),
+        ("camera twice", ["cameras.ids=[160,160]"], r"invalid cameras.ids=\[160, 160\] in config: an id appears twice"),
+        ("unknown camera", ["cameras.ids=[999]"], r"unknown camera id 999 in cameras.ids in the packaged calibrations"),
+        ("camera id not a number", ["cameras.ids=[abc]"], r"invalid cameras.ids\[0\]='abc' in config: expected Integer"),
+        ("width not a number", ["cameras.width=abc"], r"invalid cameras.width='abc' in config: expected Integer"),
+        ("width too small", ["cameras.width=10"], r"invalid cameras.width x height='10x540' in config: must be within 16x16"),
+        ("aspect ratio", ["cameras.width=1000"], r"invalid cameras.width x height=1000x540 in config: camera 160 is 3840x2160"),
+        ("camera rate not a divisor", ["cameras.rate_hz=7"], r"invalid cameras.rate_hz=7.0 in config: the simulation steps at world.physics_hz=240"),
+        ("camera rate with unit", ["cameras.rate_hz=5Hz"], r"invalid cameras.rate_hz='5Hz' in config: expected Float, got str; units are part of the key's name \(rate_hz: hertz\): write cameras.rate_hz=5"),
+        ("near beyond far", ["cameras.near_m=200"], r"invalid cameras.near_m/far_m=\(200.0, 100.0\) in config: need 0 < near_m < far_m"),
+        ("unknown stream", ["cameras.streams=[rgb,thermal]"], r"invalid cameras.streams\[\]='thermal' in config: expected one of rgb, depth, semantic"),
+        ("no rgb stream", ["cameras.streams=[depth]"], r"invalid cameras.streams=\['depth'\] in config: rgb is required"),
+        ("calibration check choice", ["cameras.calibration_check=maybe"], r"invalid cameras.calibration_check='maybe' in config: expected one of warn, error"),
+        ("calibration dir missing", ["cameras.calibration_dir=/nonexistent/calib"], r"unknown camera id 160 in cameras.ids in /nonexistent/calib: no intrinsic/extrinsic calibration pair with that id; use one of \(none found\)"),
+        ("fidelity", ["world.fidelity=ultra"], r"invalid world.fidelity='ultra' in config: expected one of empty, light, medium, default"),
+        ("physics rate not whole", ["world.physics_hz=240.5"], r"invalid world.physics_hz='240.5' in config: expected Integer, got float"),
+        ("physics rate range", ["world.physics_hz=10"], r"invalid world.physics_hz=10 in config: must be within 60..2000 Hz"),
+        ("gravity negative", ["world.gravity_mps2=-9.81"], r"invalid world.gravity_mps2=-9.81 in config: must be within 0..100 m/s\^2"),
+        ("settle range", ["world.settle_s=100"], r"invalid world.settle_s=100.0 in config: must be within 0..60 s"),
+        ("layout missing", ["world.layout=missing.csv"], r"layout file missing in .*missing.csv: no such file"),
+        ("restitution range", ["world.physics.box.restitution=2"], r"invalid world.physics.\*.restitution=2.0 in config: must be in \[0, 1\]"),
+        ("negative mass", ["world.physics.box.mass_kg=-1"], r"invalid world.physics.\*.mass_kg=-1.0 in config: must be >= 0"),
+        ("rgb encoding", ["recording.rgb_encoding=webp"], r"invalid recording.rgb_encoding='webp' in config: expected one of jpeg, png, raw"),
+        ("jpeg quality", ["recording.jpeg_quality=0"], r"invalid recording.jpeg_quality=0 in config: must be within 1..100"),
+        ("jpeg quality list", ["recording.jpeg_quality=[1]"], r"invalid recording.jpeg_quality='\[1\]' in config: expected Integer, got list"),
+        ("chunk compression", ["recording.compression=lz4"], r"invalid recording.compression='lz4' in config: expected one of zstd, none"),
+        ("zstd level", ["recording.compression_level=50"], r"invalid recording.compression_level=50 in config: zstd levels are -7..22"),
+        ("depth rate", ["recording.depth_rate_hz=2"], r"invalid recording.depth_rate_hz=2.0 in config: must divide the camera rate"),
+        ("ground truth rate", ["recording.ground_truth_rate_hz=10"], r"invalid recording.ground_truth_rate_hz=10.0 in config: ground truth must be recorded at 50 Hz or more"),
+        ("encode threads", ["recording.encode_threads=100"], r"invalid recording.encode_threads=100 in config: must be within 0..16"),
+        ("control rate", ["control_rate_hz=7"], r"invalid control_rate_hz=7.0 in config: the simulation steps at world.physics_hz=240"),
+        ("control rate zero (found by fuzzing)", ["control_rate_hz=0"], r"invalid control_rate_hz=0.0 in config: must be > 0"),
+        ("render backend", ["render.backend=vulkan"], r"invalid render.backend='vulkan' in config: expected one of auto, egl, tiny"),
+        ("localization method", ["localization.method=magic"], r"invalid localization.method='magic' in config: expected one of ground, pnp"),
+        ("localization source", ["localization.source=gps"], r"invalid localization.source='gps' in config: expected one of camera, ground_truth"),
+        ("bias nan", ["localization.bias_m=[nan,0]"], r"invalid localization.bias_m\[0\]=nan in config: not a finite number; give a number in metres"),
+        ("bias length", ["localization.bias_m=[1,2,3]"], r"invalid localization.bias_m=\[1.0, 2.0, 3.0\] in config: expected \[x_m, y_m\]"),
+        ("timeouts order", ["localization.lost_timeout_s=0.1"], r"invalid localization.lost_timeout_s=0.1 in config: must be >= localization.unobserved_timeout_s"),
+        ("delay in ms", ["localization.processing_delay_s=100"], r"invalid localization.processing_delay_s=100.0 in config: must be within 0..5 s"),
+        ("grid resolution", ["navigation.resolution_m=5"], r"invalid navigation.resolution_m=5.0 in config: must be within 0.02..0.5 m"),
+        ("navigation map", ["navigation.map=google"], r"invalid navigation.map='google' in config: expected one of world, simlan"),
+        ("clearance negative", ["navigation.clearance_m=-1"], r"invalid navigation.clearance_m=-1.0 in config: must be > 0"),
+        ("birdseye rate", ["birdseye.rate_hz=3"], r"invalid birdseye.rate_hz=3.0 in config: must divide the camera rate"),
         ("birdseye region", ["birdseye.x_m=[10,0]"], r"birdseye.x_m.*empty region \(max must exceed min\)"),
         ("birdseye resolution", ["birdseye.px_per_m=0"], r"birdseye.px_per_m"),
-        (
-            "agent type",
-            ["agents.robot_agent_1.type=hovercraft"],
-            r"unknown agent type 'hovercraft' in agents.robot_agent_1.type: known types: pallet_truck",
-        ),
-        (
-            "agent key misspelt",
-            ["agents.robot_agent_1.typ=jackal"],
-            r"unknown key agents.robot_agent_1.typ in config: AgentConfig has no such key; did you mean agents.robot_agent_1.type\?",
-        ),
-        (
-            "pose length",
-            ["agents.robot_agent_1.pose=[1,2]"],
-            r"invalid agents.robot_agent_1.pose=\[1.0, 2.0\] in config: expected \[x_m, y_m, yaw_rad\]",
-        ),
-        (
-            "yaw in degrees",
-            ["agents.robot_agent_1.pose=[-16,0.4,90]"],
-            r"invalid agents.robot_agent_1.pose\[2\]=90.0 in config: yaw_rad must be within \[-2 pi, 2 pi\] radians \(this looks like degrees\); give radians, e.g. 1.5708",
-        ),
-        (
-            "pose nan",
-            ["agents.robot_agent_1.pose=[nan,0.4,0]"],
-            r"invalid agents.robot_agent_1.pose\[0\]=nan in config: not a finite number",
-        ),
-        (
-            "pose outside",
-            ["agents.robot_agent_1.pose=[100.0,0.0,0.0]"],
-            r"invalid agents.robot_agent_1.pose=\[100.0, 0.0, 0.0\] in config: the robot's footprint leaves the building",
-        ),
-        (
-            "speed nan",
-            ["agents.robot_agent_1.speed_mps=nan"],
-            r"invalid agents.robot_agent_1.speed_mps=nan in config: not a finite number",
-        ),
-        (
-            "speed range",
-            ["agents.robot_agent_1.speed_mps=10"],
-            r"invalid agents.robot_agent_1.speed_mps=10.0 in config: must be within \(0, 3\] m/s",
-        ),
-        (
-            "marker id range",
-            ["agents.robot_agent_1.marker_id=1000"],
-            r"invalid agents.robot_agent_1.marker_id=1000 in config: DICT_5X5_1000 has ids 0..999",
-        ),
-        (
-            "goal shape",
-            ["agents.robot_agent_1.goals=[[1.0,2.0,3.0]]"],
-            r"invalid agents.robot_agent_1.goals\[0\]=\[1.0, 2.0, 3.0\] in config: expected \[x_m, y_m\]",
-        ),
-        (
-            "goal integers",
-            ["agents.robot_agent_1.goals=[[1,2]]"],
-            r"invalid agents.robot_agent_1.goals\[0\] in config: 1 is an integer, and numbers in nested lists are not converted; write every number with a decimal point",
-        ),
-        (
-            "goal in obstacle",
-            ["agents.robot_agent_1.goals=[[0.0,3.5]]"],
-            r"invalid agents.robot_agent_1.goals\[0\]=\[0.0, 3.5\] in config: the goal is inside an obstacle",
-        ),
-        (
-            "scenario names unspawned agent",
-            ["scenario=multi_robot", "agents=single_truck"],
-            r"unknown agent robot_agent_2 in config: something refers to it \(a scenario's goals, an override\) but the spawn list does not spawn it",
-        ),
-        (
-            "marker id reused",
-            ["agents=four_robots", "agents.robot_agent_3.marker_id=1"],
-            r"invalid agents.robot_agent_3.marker_id=1 in config: already used by robot_agent_1",
-        ),
-        (
-            "agents overlap",
-            ["agents=four_robots", "agents.robot_agent_2.pose=[-20.5,1.5,0.0]"],
-            r"invalid agents.robot_agent_2.pose=\[-20.5, 1.5, 0.0\] in config: its footprint overlaps robot_agent_1's",
-        ),
-        (
-            "new agent on the command line",
-            ["+agents.robot_agent_5={type:jackal,pose:[0.0,0.0,0.0]}"],
-            r"cannot add agent .*robot_agent_5 in command line: new agents go in a spawn list file",
-        ),
-        (
-            "group given a list (found by fuzzing)",
-            ["agents=[0]"],
-            r"invalid configuration in command line: TypeError: argument of type 'int' is not iterable",
-        ),
+        ("agent type", ["agents.robot_agent_1.type=hovercraft"], r"unknown agent type 'hovercraft' in agents.robot_agent_1.type: known types: pallet_truck"),
+        ("agent key misspelt", ["agents.robot_agent_1.typ=jackal"], r"unknown key agents.robot_agent_1.typ in config: AgentConfig has no such key; did you mean agents.robot_agent_1.type\?"),
+        ("pose length", ["agents.robot_agent_1.pose=[1,2]"], r"invalid agents.robot_agent_1.pose=\[1.0, 2.0\] in config: expected \[x_m, y_m, yaw_rad\]"),
+        ("yaw in degrees", ["agents.robot_agent_1.pose=[-16,0.4,90]"], r"invalid agents.robot_agent_1.pose\[2\]=90.0 in config: yaw_rad must be within \[-2 pi, 2 pi\] radians \(this looks like degrees\); give radians, e.g. 1.5708"),
+        ("pose nan", ["agents.robot_agent_1.pose=[nan,0.4,0]"], r"invalid agents.robot_agent_1.pose\[0\]=nan in config: not a finite number"),
+        ("pose outside", ["agents.robot_agent_1.pose=[100.0,0.0,0.0]"], r"invalid agents.robot_agent_1.pose=\[100.0, 0.0, 0.0\] in config: the robot's footprint leaves the building"),
+        ("speed nan", ["agents.robot_agent_1.speed_mps=nan"], r"invalid agents.robot_agent_1.speed_mps=nan in config: not a finite number"),
+        ("speed range", ["agents.robot_agent_1.speed_mps=10"], r"invalid agents.robot_agent_1.speed_mps=10.0 in config: must be within \(0, 3\] m/s"),
+        ("marker id range", ["agents.robot_agent_1.marker_id=1000"], r"invalid agents.robot_agent_1.marker_id=1000 in config: DICT_5X5_1000 has ids 0..999"),
+        ("goal shape", ["agents.robot_agent_1.goals=[[1.0,2.0,3.0]]"], r"invalid agents.robot_agent_1.goals\[0\]=\[1.0, 2.0, 3.0\] in config: expected \[x_m, y_m\]"),
+        ("goal integers", ["agents.robot_agent_1.goals=[[1,2]]"], r"invalid agents.robot_agent_1.goals\[0\] in config: 1 is an integer, and numbers in nested lists are not converted; write every number with a decimal point"),
+        ("goal in obstacle", ["agents.robot_agent_1.goals=[[0.0,3.5]]"], r"invalid agents.robot_agent_1.goals\[0\]=\[0.0, 3.5\] in config: the goal is inside an obstacle"),
+        ("scenario names unspawned agent", ["scenario=multi_robot", "agents=single_truck"], r"unknown agent robot_agent_2 in config: something refers to it \(a scenario's goals, an override\) but the spawn list does not spawn it"),
+        ("marker id reused", ["agents=four_robots", "agents.robot_agent_3.marker_id=1"], r"invalid agents.robot_agent_3.marker_id=1 in config: already used by robot_agent_1"),
+        ("agents overlap", ["agents=four_robots", "agents.robot_agent_2.pose=[-20.5,1.5,0.0]"], r"invalid agents.robot_agent_2.pose=\[-20.5, 1.5, 0.0\] in config: its footprint overlaps robot_agent_1's"),
+        ("new agent on the command line", ["+agents.robot_agent_5={type:jackal,pose:[0.0,0.0,0.0]}"], r"cannot add agent .*robot_agent_5 in command line: new agents go in a spawn list file"),
+        ("group given a list (found by fuzzing)", ["agents=[0]"], r"invalid configuration in command line: TypeError: argument of type 'int' is not iterable"),
         ("override syntax", ["x=[1,2"], r"invalid override in command line: .*; write KEY=VALUE"),
-        (
-            "missing mandatory",
-            ["cameras.ids=???"],
-            r"missing value for cameras.ids in config: the key has no default",
-        ),
+        ("missing mandatory", ["cameras.ids=???"], r"missing value for cameras.ids in config: the key has no default"),
     ]
 ]
+# fmt: on
 
 
 def run_config_case(case: Case) -> None:
@@ -443,182 +169,49 @@ def _matrix(path: Path, key: str, data: str, rows: int | None = None, cols: int 
 INTR, EXTR = Path("intrinsic/163.yaml"), Path("extrinsic/163.yaml")
 R_163 = "-0.9967456571498724, 0.06788988310855833, -0.04346330319217853, 0.06855035591376359, 0.9975509770059878, -0.013888735669448902, 0.042413955922140596, -0.016822961864837373, -0.9989584797663659"
 
+# fmt: off
 CALIBRATION_CASES = [
     Case(*c)
     for c in [
         ("intrinsic missing", lambda r: (r / INTR).unlink(), r"unknown camera id 163 in cameras.ids"),
         ("extrinsic missing", lambda r: (r / EXTR).unlink(), r"unknown camera id 163 in cameras.ids"),
-        (
-            "not UTF-8",
-            lambda r: (r / INTR).write_bytes(b"\xff\xfe\x00garbage"),
-            r"calibration file unreadable in .*163.yaml: not UTF-8 text",
-        ),
-        (
-            "no YAML header",
-            lambda r: (r / INTR).write_text("K: [1, 2, 3]\n"),
-            r"calibration file unreadable in .*163.yaml: not an OpenCV FileStorage YAML file",
-        ),
-        (
-            "empty file",
-            lambda r: (r / EXTR).write_text(""),
-            r"calibration file unreadable in .*extrinsic/163.yaml",
-        ),
-        (
-            "truncated",
-            lambda r: (r / INTR).write_text((r / INTR).read_text()[:150]),
-            r"calibration (file unreadable|key 'K' has the wrong shape|key '\w+' missing) in .*intrinsic/163.yaml",
-        ),
-        (
-            "YAML syntax",
-            lambda r: (r / INTR).write_text("%YAML:1.0\n---\nK: !!opencv-matrix\n  rows: [3\n"),
-            r"calibration file unreadable in .*163.yaml: OpenCV cannot parse it",
-        ),
-        (
-            "too large",
-            lambda r: (r / INTR).write_text("%YAML:1.0\n" + "#" * (2 << 20)),
-            r"calibration file too large in .*163.yaml: over 1048576 bytes",
-        ),
-        (
-            "flow nesting bomb (crashes OpenCV's parser)",
-            lambda r: (r / INTR).write_text("%YAML:1.0\n---\nK: " + "[" * 100_000),
-            r"calibration file unreadable in .*163.yaml: brackets nested 100000 deep \(more than 32; OpenCV's parser would crash\)",
-        ),
-        (
-            "K missing",
-            lambda r: _edit(r / INTR, "K: !!opencv-matrix", "Kx: !!opencv-matrix"),
-            r"calibration key 'K' missing in .*intrinsic/163.yaml",
-        ),
-        (
-            "D missing",
-            lambda r: _edit(r / INTR, "D: !!opencv-matrix", "E: !!opencv-matrix"),
-            r"calibration key 'D' missing in .*intrinsic/163.yaml",
-        ),
-        (
-            "image_shape missing",
-            lambda r: _edit(r / INTR, "image_shape:", "shape:"),
-            r"calibration key 'image_shape' missing",
-        ),
-        (
-            "rot_mat missing",
-            lambda r: _edit(r / EXTR, "rot_mat:", "rotation:"),
-            r"calibration key 'rot_mat' missing in .*extrinsic/163.yaml",
-        ),
+        ("not UTF-8", lambda r: (r / INTR).write_bytes(b"\xff\xfe\x00garbage"), r"calibration file unreadable in .*163.yaml: not UTF-8 text"),
+        ("no YAML header", lambda r: (r / INTR).write_text("K: [1, 2, 3]\n"), r"calibration file unreadable in .*163.yaml: not an OpenCV FileStorage YAML file"),
+        ("empty file", lambda r: (r / EXTR).write_text(""), r"calibration file unreadable in .*extrinsic/163.yaml"),
+        ("truncated", lambda r: (r / INTR).write_text((r / INTR).read_text()[:150]), r"calibration (file unreadable|key 'K' has the wrong shape|key '\w+' missing) in .*intrinsic/163.yaml"),
+        ("YAML syntax", lambda r: (r / INTR).write_text("%YAML:1.0\n---\nK: !!opencv-matrix\n  rows: [3\n"), r"calibration file unreadable in .*163.yaml: OpenCV cannot parse it"),
+        ("too large", lambda r: (r / INTR).write_text("%YAML:1.0\n" + "#" * (2 << 20)), r"calibration file too large in .*163.yaml: over 1048576 bytes"),
+        ("flow nesting bomb (crashes OpenCV's parser)", lambda r: (r / INTR).write_text("%YAML:1.0\n---\nK: " + "[" * 100_000), r"calibration file unreadable in .*163.yaml: brackets nested 100000 deep \(more than 32; OpenCV's parser would crash\)"),
+        ("K missing", lambda r: _edit(r / INTR, "K: !!opencv-matrix", "Kx: !!opencv-matrix"), r"calibration key 'K' missing in .*intrinsic/163.yaml"),
+        ("D missing", lambda r: _edit(r / INTR, "D: !!opencv-matrix", "E: !!opencv-matrix"), r"calibration key 'D' missing in .*intrinsic/163.yaml"),
+        ("image_shape missing", lambda r: _edit(r / INTR, "image_shape:", "shape:"), r"calibration key 'image_shape' missing"),
+        ("rot_mat missing", lambda r: _edit(r / EXTR, "rot_mat:", "rotation:"), r"calibration key 'rot_mat' missing in .*extrinsic/163.yaml"),
         ("t_vec missing", lambda r: _edit(r / EXTR, "t_vec:", "t:"), r"calibration key 't_vec' missing"),
-        (
-            "P missing",
-            lambda r: _edit(r / EXTR, "camera_matrix_p:", "p:"),
-            r"calibration key 'camera_matrix_p' missing",
-        ),
-        (
-            "position missing",
-            lambda r: _edit(r / EXTR, "position:", "pos:"),
-            r"calibration key 'position' missing",
-        ),
-        (
-            "K not a matrix",
-            lambda r: _edit(r / INTR, "K: !!opencv-matrix", "K: 3\nK_old: !!opencv-matrix"),
-            r"calibration key 'K' missing in .*intrinsic/163.yaml",
-        ),
-        (
-            "K 2x2",
-            lambda r: _matrix(r / INTR, "K", "1., 0., 0., 1.", 2, 2),
-            r"calibration key 'K' has the wrong shape in .*: got \(2, 2\), expected \(3, 3\)",
-        ),
-        (
-            "D 4 values",
-            lambda r: _matrix(r / INTR, "D", "0.1, 0.1, 0., 0.", 4, 1),
-            r"calibration key 'D' has the wrong shape",
-        ),
-        (
-            "K NaN",
-            lambda r: _matrix(r / INTR, "K", "2149., 0., .NaN, 0., 2145., 1097., 0., 0., 1."),
-            r"calibration key 'K' is not finite in .*: NaN or inf inside",
-        ),
-        (
-            "t_vec inf",
-            lambda r: _matrix(r / EXTR, "t_vec", "6.6, .Inf, 7.0"),
-            r"calibration key 't_vec' is not finite",
-        ),
-        (
-            "D NaN",
-            lambda r: _matrix(r / INTR, "D", ".NaN, 0.2, 0., 0., -0.07"),
-            r"calibration key 'D' is not finite",
-        ),
-        (
-            "R scaled",
-            lambda r: _matrix(
-                r / EXTR, "rot_mat", ", ".join(str(1.01 * float(v)) for v in R_163.split(", "))
-            ),
-            r"calibration rot_mat is not a rotation in .*extrinsic/163.yaml: R\^T R deviates from I",
-        ),
-        (
-            "R reflection",
-            lambda r: _matrix(r / EXTR, "rot_mat", ", ".join(str(-float(v)) for v in R_163.split(", "))),
-            r"calibration rot_mat is not a rotation in .*: R\^T R deviates from I by .* \(det 1.0000\)|det -1.0000",
-        ),
-        (
-            "R zero",
-            lambda r: _matrix(r / EXTR, "rot_mat", ", ".join(["0."] * 9)),
-            r"calibration rot_mat is not a rotation",
-        ),
-        (
-            "fx negative",
-            lambda r: _matrix(r / INTR, "K", "-2149., 0., 1927., 0., 2145., 1097., 0., 0., 1."),
-            r"calibration K invalid in .*intrinsic/163.yaml: not an upper-triangular camera matrix with fx, fy > 0",
-        ),
-        (
-            "K lower triangle",
-            lambda r: _matrix(r / INTR, "K", "2149., 0., 1927., 5., 2145., 1097., 0., 0., 1."),
-            r"calibration K invalid",
-        ),
-        (
-            "fx implausible",
-            lambda r: _matrix(r / INTR, "K", "2.1e9, 0., 1927., 0., 2145., 1097., 0., 0., 1."),
-            r"calibration K implausible in .*: focal lengths must be within",
-        ),
-        (
-            "principal point far off",
-            lambda r: _matrix(r / INTR, "K", "2149., 0., 1e7, 0., 2145., 1097., 0., 0., 1."),
-            r"calibration K implausible",
-        ),
-        (
-            "D implausible",
-            lambda r: _matrix(r / INTR, "D", "5e3, 0.2, 0., 0., -0.07"),
-            r"calibration D implausible in .*: distortion coefficients beyond",
-        ),
-        (
-            "t_vec implausible",
-            lambda r: _matrix(r / EXTR, "t_vec", "6.6, 1e9, 7.0"),
-            r"calibration t_vec implausible in .*extrinsic/163.yaml",
-        ),
-        (
-            "image_shape fractional",
-            lambda r: _matrix(r / INTR, "image_shape", "2160.5, 3840., 3."),
-            r"calibration image_shape invalid in .*: got \[2160.5, 3840.0, 3.0\]",
-        ),
-        (
-            "image_shape zero",
-            lambda r: _matrix(r / INTR, "image_shape", "0., 0., 3."),
-            r"calibration image_shape invalid",
-        ),
-        (
-            "data not numbers",
-            lambda r: _matrix(r / INTR, "K", "a, b, c, d, e, f, g, h, i"),
-            r"calibration (file unreadable|key 'K' (missing|has the wrong shape))",
-        ),
-        # SIMLAN's own camera 163: its camera_matrix_p is K'[R|t] for an ideal K', not K[R|t]
-        (
-            "P disagrees with K[R|t] (check=error)",
-            "error",
-            r"calibration files disagree in camera 163: 163.yaml: camera_matrix_p disagrees with K\[R\|t\].*; fix the files or set cameras.calibration_check=warn",
-        ),
-        (
-            "position disagrees with -R^T t (check=error)",
-            lambda r: _matrix(r / EXTR, "position", "1., 2., 3."),
-            r"calibration files disagree in camera 163: .*position disagrees with -R\^T t by",
-        ),
+        ("P missing", lambda r: _edit(r / EXTR, "camera_matrix_p:", "p:"), r"calibration key 'camera_matrix_p' missing"),
+        ("position missing", lambda r: _edit(r / EXTR, "position:", "pos:"), r"calibration key 'position' missing"),
+        ("K not a matrix", lambda r: _edit(r / INTR, "K: !!opencv-matrix", "K: 3\nK_old: !!opencv-matrix"), r"calibration key 'K' missing in .*intrinsic/163.yaml"),
+        ("K 2x2", lambda r: _matrix(r / INTR, "K", "1., 0., 0., 1.", 2, 2), r"calibration key 'K' has the wrong shape in .*: got \(2, 2\), expected \(3, 3\)"),
+        ("D 4 values", lambda r: _matrix(r / INTR, "D", "0.1, 0.1, 0., 0.", 4, 1), r"calibration key 'D' has the wrong shape"),
+        ("K NaN", lambda r: _matrix(r / INTR, "K", "2149., 0., .NaN, 0., 2145., 1097., 0., 0., 1."), r"calibration key 'K' is not finite in .*: NaN or inf inside"),
+        ("t_vec inf", lambda r: _matrix(r / EXTR, "t_vec", "6.6, .Inf, 7.0"), r"calibration key 't_vec' is not finite"),
+        ("D NaN", lambda r: _matrix(r / INTR, "D", ".NaN, 0.2, 0., 0., -0.07"), r"calibration key 'D' is not finite"),
+        ("R scaled", lambda r: _matrix(r / EXTR, "rot_mat", ", ".join(str(1.01 * float(v)) for v in R_163.split(", "))), r"calibration rot_mat is not a rotation in .*extrinsic/163.yaml: R\^T R deviates from I"),
+        ("R reflection", lambda r: _matrix(r / EXTR, "rot_mat", ", ".join(str(-float(v)) for v in R_163.split(", "))), r"calibration rot_mat is not a rotation in .*: R\^T R deviates from I by .* \(det 1.0000\)|det -1.0000"),
+        ("R zero", lambda r: _matrix(r / EXTR, "rot_mat", ", ".join(["0."] * 9)), r"calibration rot_mat is not a rotation"),
+        ("fx negative", lambda r: _matrix(r / INTR, "K", "-2149., 0., 1927., 0., 2145., 1097., 0., 0., 1."), r"calibration K invalid in .*intrinsic/163.yaml: not an upper-triangular camera matrix with fx, fy > 0"),
+        ("K lower triangle", lambda r: _matrix(r / INTR, "K", "2149., 0., 1927., 5., 2145., 1097., 0., 0., 1."), r"calibration K invalid"),
+        ("fx implausible", lambda r: _matrix(r / INTR, "K", "2.1e9, 0., 1927., 0., 2145., 1097., 0., 0., 1."), r"calibration K implausible in .*: focal lengths must be within"),
+        ("principal point far off", lambda r: _matrix(r / INTR, "K", "2149., 0., 1e7, 0., 2145., 1097., 0., 0., 1."), r"calibration K implausible"),
+        ("D implausible", lambda r: _matrix(r / INTR, "D", "5e3, 0.2, 0., 0., -0.07"), r"calibration D implausible in .*: distortion coefficients beyond"),
+        ("t_vec implausible", lambda r: _matrix(r / EXTR, "t_vec", "6.6, 1e9, 7.0"), r"calibration t_vec implausible in .*extrinsic/163.yaml"),
+        ("image_shape fractional", lambda r: _matrix(r / INTR, "image_shape", "2160.5, 3840., 3."), r"calibration image_shape invalid in .*: got \[2160.5, 3840.0, 3.0\]"),
+        ("image_shape zero", lambda r: _matrix(r / INTR, "image_shape", "0., 0., 3."), r"calibration image_shape invalid"),
+        ("data not numbers", lambda r: _matrix(r / INTR, "K", "a, b, c, d, e, f, g, h, i"), r"calibration (file unreadable|key 'K' (missing|has the wrong shape))"),
+        ("P disagrees with K[R|t] (check=error)", "error", r"calibration files disagree in camera 163: 163.yaml: camera_matrix_p disagrees with K\[R\|t\].*; fix the files or set cameras.calibration_check=warn"),
+        ("position disagrees with -R^T t (check=error)", lambda r: _matrix(r / EXTR, "position", "1., 2., 3."), r"calibration files disagree in camera 163: .*position disagrees with -R\^T t by"),
     ]
 ]
+# fmt: on
 
 
 def run_calibration_case(case: Case, tmp: Path) -> None:
@@ -646,80 +239,25 @@ def _urdf(r: Path, name: str, old: str, new: str) -> None:
 
 
 TRUCK = AGENT_TYPES["pallet_truck"]
+# fmt: off
 URDF_CASES = [
     Case(*c)
     for c in [
-        (
-            "file missing",
-            lambda r: (r / "pallet_truck.urdf").unlink(),
-            r"URDF file missing in .*pallet_truck.urdf \(agent type pallet_truck\): no such file",
-        ),
-        (
-            "empty file",
-            lambda r: (r / "pallet_truck.urdf").write_text(""),
-            r"URDF file is not valid XML in .*: no element found at line 1",
-        ),
-        (
-            "truncated XML",
-            lambda r: (r / "pallet_truck.urdf").write_text((r / "pallet_truck.urdf").read_text()[:500]),
-            r"URDF file is not valid XML in .*pallet_truck.urdf .*at line \d+, column \d+",
-        ),
-        (
-            "not UTF-8",
-            lambda r: (r / "pallet_truck.urdf").write_bytes(b"<robot>\xff\xfe</robot>"),
-            r"URDF file unreadable in .*: not UTF-8 text",
-        ),
-        (
-            "root not robot",
-            lambda r: (r / "pallet_truck.urdf").write_text("<model name='x'><link name='a'/></model>"),
-            r"URDF file has no <robot> root in .*: the root element is <model>",
-        ),
-        (
-            "no links",
-            lambda r: (r / "pallet_truck.urdf").write_text("<robot name='x'></robot>"),
-            r"URDF file has no links",
-        ),
-        (
-            "joint to unknown link",
-            lambda r: _urdf(
-                r, "pallet_truck.urdf", '<child link="left_wheel"/>', '<child link="left_wheeel"/>'
-            ),
-            r"URDF joint 'left_wheel_joint' names an unknown child link in .*: child link 'left_wheeel' is not defined",
-        ),
-        (
-            "marker placeholder missing",
-            lambda r: _urdf(r, "pallet_truck.urdf", "<!-- ARUCO_MARKER -->", ""),
-            r"URDF lacks the marker placeholder in .*pallet_truck.urdf .*: no <!-- ARUCO_MARKER --> line",
-        ),
-        (
-            "wheel joint missing",
-            lambda r: _urdf(r, "pallet_truck.urdf", 'name="right_wheel_joint"', 'name="right_joint"'),
-            r"URDF lacks wheel joint 'right_wheel_joint' in .*: a diff-drive robot is driven through left_wheel_joint and right_wheel_joint",
-        ),
-        (
-            "wheel joint fixed",
-            lambda r: _urdf(
-                r,
-                "pallet_truck.urdf",
-                'name="left_wheel_joint" type="continuous"',
-                'name="left_wheel_joint" type="fixed"',
-            ),
-            r"URDF wheel joint 'left_wheel_joint' cannot turn in .*: its type is 'fixed'",
-        ),
-        (
-            "caster link missing",
-            lambda r: _urdf(r, "pallet_truck.urdf", 'link name="rear_caster"', 'link name="rear_wheel"'),
-            r"URDF (lacks caster links in .*: rear_caster|joint '\w+' names an unknown child link)",
-        ),
-        (
-            "XML entity bomb",
-            lambda r: (r / "pallet_truck.urdf").write_text(
-                '<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;"><!ENTITY c "&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;"><!ENTITY d "&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;"><!ENTITY e "&d;&d;&d;&d;&d;&d;&d;&d;&d;&d;"><!ENTITY f "&e;&e;&e;&e;&e;&e;&e;&e;&e;&e;"><!ENTITY g "&f;&f;&f;&f;&f;&f;&f;&f;&f;&f;"><!ENTITY h "&g;&g;&g;&g;&g;&g;&g;&g;&g;&g;">]><robot name="&h;"></robot>'
-            ),
-            r"URDF file (is not valid XML|has no links)",
-        ),
+        ("file missing", lambda r: (r / "pallet_truck.urdf").unlink(), r"URDF file missing in .*pallet_truck.urdf \(agent type pallet_truck\): no such file"),
+        ("empty file", lambda r: (r / "pallet_truck.urdf").write_text(""), r"URDF file is not valid XML in .*: no element found at line 1"),
+        ("truncated XML", lambda r: (r / "pallet_truck.urdf").write_text((r / "pallet_truck.urdf").read_text()[:500]), r"URDF file is not valid XML in .*pallet_truck.urdf .*at line \d+, column \d+"),
+        ("not UTF-8", lambda r: (r / "pallet_truck.urdf").write_bytes(b"<robot>\xff\xfe</robot>"), r"URDF file unreadable in .*: not UTF-8 text"),
+        ("root not robot", lambda r: (r / "pallet_truck.urdf").write_text("<model name='x'><link name='a'/></model>"), r"URDF file has no <robot> root in .*: the root element is <model>"),
+        ("no links", lambda r: (r / "pallet_truck.urdf").write_text("<robot name='x'></robot>"), r"URDF file has no links"),
+        ("joint to unknown link", lambda r: _urdf(r, "pallet_truck.urdf", '<child link="left_wheel"/>', '<child link="left_wheeel"/>'), r"URDF joint 'left_wheel_joint' names an unknown child link in .*: child link 'left_wheeel' is not defined"),
+        ("marker placeholder missing", lambda r: _urdf(r, "pallet_truck.urdf", "<!-- ARUCO_MARKER -->", ""), r"URDF lacks the marker placeholder in .*pallet_truck.urdf .*: no <!-- ARUCO_MARKER --> line"),
+        ("wheel joint missing", lambda r: _urdf(r, "pallet_truck.urdf", 'name="right_wheel_joint"', 'name="right_joint"'), r"URDF lacks wheel joint 'right_wheel_joint' in .*: a diff-drive robot is driven through left_wheel_joint and right_wheel_joint"),
+        ("wheel joint fixed", lambda r: _urdf(r, "pallet_truck.urdf", 'name="left_wheel_joint" type="continuous"', 'name="left_wheel_joint" type="fixed"',), r"URDF wheel joint 'left_wheel_joint' cannot turn in .*: its type is 'fixed'"),
+        ("caster link missing", lambda r: _urdf(r, "pallet_truck.urdf", 'link name="rear_caster"', 'link name="rear_wheel"'), r"URDF (lacks caster links in .*: rear_caster|joint '\w+' names an unknown child link)"),
+        ("XML entity bomb", lambda r: (r / "pallet_truck.urdf").write_text('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;"><!ENTITY c "&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;"><!ENTITY d "&c;&c;&c;&c;&c;&c;&c;&c;&c;&c;"><!ENTITY e "&d;&d;&d;&d;&d;&d;&d;&d;&d;&d;"><!ENTITY f "&e;&e;&e;&e;&e;&e;&e;&e;&e;&e;"><!ENTITY g "&f;&f;&f;&f;&f;&f;&f;&f;&f;&f;"><!ENTITY h "&g;&g;&g;&g;&g;&g;&g;&g;&g;&g;">]><robot name="&h;"></robot>'), r"URDF file (is not valid XML|has no links)"),
     ]
 ]
+# fmt: on
 
 
 def run_urdf_case(case: Case, tmp: Path, kind: AgentType = TRUCK) -> None:
@@ -732,46 +270,24 @@ def run_urdf_case(case: Case, tmp: Path, kind: AgentType = TRUCK) -> None:
 
 # ------------------------------------------------------------------------------------ layout
 HEADER = "model,name,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad,static,world_setups\n"
+# fmt: off
 LAYOUT_CASES = [
     Case(*c)
     for c in [
         ("file missing", None, r"layout file missing in .*layout.csv: no such file"),
         ("empty file", "", r"layout file (unreadable|lacks columns) in .*layout.csv"),
-        (
-            "missing columns",
-            "model,x_m,y_m\nshelf,1,2\n",
-            r"layout file lacks columns in .*: name, z_m, roll_rad, pitch_rad, yaw_rad, static, world_setups",
-        ),
-        (
-            "binary garbage",
-            b"\x00\xff\xfe\x01" * 100,
-            r"layout file (unreadable|lacks columns) in .*layout.csv",
-        ),
-        (
-            "unknown model",
-            HEADER + "eur_palet,s1,1,2,0,0,0,0,1,default\n",
-            r"layout names an unknown model 'eur_palet' in .*: this twin has no geometry for it .*; did you mean",
-        ),
-        (
-            "NaN pose",
-            HEADER + "concrete_ground,g,nan,2,0,0,0,0,1,default\n",
-            r"layout row invalid in .* \(model 'concrete_ground', name 'g'\): a pose value or the model is empty or not finite",
-        ),
+        ("missing columns", "model,x_m,y_m\nshelf,1,2\n", r"layout file lacks columns in .*: name, z_m, roll_rad, pitch_rad, yaw_rad, static, world_setups"),
+        ("binary garbage", b"\x00\xff\xfe\x01" * 100, r"layout file (unreadable|lacks columns) in .*layout.csv"),
+        ("unknown model", HEADER + "eur_palet,s1,1,2,0,0,0,0,1,default\n", r"layout names an unknown model 'eur_palet' in .*: this twin has no geometry for it .*; did you mean"),
+        ("NaN pose", HEADER + "concrete_ground,g,nan,2,0,0,0,0,1,default\n", r"layout row invalid in .* \(model 'concrete_ground', name 'g'\): a pose value or the model is empty or not finite"),
         ("inf pose", HEADER + "concrete_ground,g,1,inf,0,0,0,0,1,default\n", r"layout row invalid"),
         ("empty pose value", HEADER + "concrete_ground,g,1,,0,0,0,0,1,default\n", r"layout row invalid"),
         ("empty model", HEADER + ",g,1,2,0,0,0,0,1,default\n", r"layout row invalid"),
-        (
-            "pose not a number",
-            HEADER + "concrete_ground,g,one,2,0,0,0,0,1,default\n",
-            r"layout file unreadable in .*layout.csv",
-        ),
-        (
-            "unknown fidelity level",
-            HEADER + "concrete_ground,g,1,2,0,0,0,0,1,default ultra\n",
-            r"layout row has an unknown fidelity level in .*: ultra",
-        ),
+        ("pose not a number", HEADER + "concrete_ground,g,one,2,0,0,0,0,1,default\n", r"layout file unreadable in .*layout.csv"),
+        ("unknown fidelity level", HEADER + "concrete_ground,g,1,2,0,0,0,0,1,default ultra\n", r"layout row has an unknown fidelity level in .*: ultra"),
     ]
 ]
+# fmt: on
 
 
 def run_layout_case(case: Case, tmp: Path) -> None:
@@ -852,108 +368,32 @@ def _set_custom(bag: Path, key: str, value: str | None) -> None:
     _meta(bag, edit)
 
 
+# fmt: off
 RECORDING_CASES = [
     Case(*c)
     for c in [
-        (
-            "path missing",
-            lambda b: shutil.rmtree(b),
-            r"not a readable recording in .*: no such file or directory; check the path",
-        ),
-        (
-            "directory without a bag",
-            lambda b: [p.unlink() for p in list(b.iterdir())],
-            r"not a readable recording in .*: no metadata.yaml \(not a ROS 2 bag\)",
-        ),
-        (
-            "crashed: MCAP without metadata",
-            lambda b: (b / "metadata.yaml").unlink(),
-            r"recording is unfinished in .*: an MCAP file without metadata.yaml \(the run crashed or was killed\); run `python -m simlan_data.recover .*` to keep everything up to its last flushed chunk",
-        ),
-        (
-            "metadata not YAML",
-            lambda b: (b / "metadata.yaml").write_text("{[: oops"),
-            r"not a readable recording in .*: .*; run `python -m simlan_data.recover",
-        ),
-        (
-            "metadata nested too deeply",
-            lambda b: (b / "metadata.yaml").write_text("[" * 100_000),
-            r"not a readable recording in .*: metadata.yaml is nested too deeply",
-        ),
-        (
-            "metadata count not an integer (found by fuzzing)",
-            lambda b: (b / "metadata.yaml").write_text(
-                (b / "metadata.yaml").read_text().replace("message_count: 121", "message_count: 1:1", 1)
-            ),
-            r"not a readable recording in .*: metadata.yaml holds a message count or time that is not an integer",
-        ),
-        (
-            "metadata without bag info",
-            lambda b: (b / "metadata.yaml").write_text("hello: world\n"),
-            r"not a readable recording in .*",
-        ),
-        (
-            "metadata huge",
-            lambda b: (b / "metadata.yaml").write_text("# " + "x" * (17 << 20)),
-            r"not a readable recording in .*",
-        ),
-        (
-            "MCAP truncated",
-            lambda b: (b / f"{b.name}.mcap").write_bytes((b / f"{b.name}.mcap").read_bytes()[:-300]),
-            r"not a readable recording in .*; run `python -m simlan_data.recover",
-        ),
-        (
-            "MCAP cut in half",
-            lambda b: (b / f"{b.name}.mcap").write_bytes((b / f"{b.name}.mcap").read_bytes()[:2000]),
-            r"not a readable recording in .*; run `python -m simlan_data.recover",
-        ),
-        (
-            "MCAP is garbage",
-            lambda b: (b / f"{b.name}.mcap").write_bytes(b"garbage" * 500),
-            r"not a readable recording in .*",
-        ),
+        ("path missing", lambda b: shutil.rmtree(b), r"not a readable recording in .*: no such file or directory; check the path"),
+        ("directory without a bag", lambda b: [p.unlink() for p in list(b.iterdir())], r"not a readable recording in .*: no metadata.yaml \(not a ROS 2 bag\)"),
+        ("crashed: MCAP without metadata", lambda b: (b / "metadata.yaml").unlink(), r"recording is unfinished in .*: an MCAP file without metadata.yaml \(the run crashed or was killed\); run `python -m simlan_data.recover .*` to keep everything up to its last flushed chunk"),
+        ("metadata not YAML", lambda b: (b / "metadata.yaml").write_text("{[: oops"), r"not a readable recording in .*: .*; run `python -m simlan_data.recover"),
+        ("metadata nested too deeply", lambda b: (b / "metadata.yaml").write_text("[" * 100_000), r"not a readable recording in .*: metadata.yaml is nested too deeply"),
+        ("metadata count not an integer (found by fuzzing)", lambda b: (b / "metadata.yaml").write_text((b / "metadata.yaml").read_text().replace("message_count: 121", "message_count: 1:1", 1)), r"not a readable recording in .*: metadata.yaml holds a message count or time that is not an integer"),
+        ("metadata without bag info", lambda b: (b / "metadata.yaml").write_text("hello: world\n"), r"not a readable recording in .*"),
+        ("metadata huge", lambda b: (b / "metadata.yaml").write_text("# " + "x" * (17 << 20)), r"not a readable recording in .*"),
+        ("MCAP truncated", lambda b: (b / f"{b.name}.mcap").write_bytes((b / f"{b.name}.mcap").read_bytes()[:-300]), r"not a readable recording in .*; run `python -m simlan_data.recover"),
+        ("MCAP cut in half", lambda b: (b / f"{b.name}.mcap").write_bytes((b / f"{b.name}.mcap").read_bytes()[:2000]), r"not a readable recording in .*; run `python -m simlan_data.recover"),
+        ("MCAP is garbage", lambda b: (b / f"{b.name}.mcap").write_bytes(b"garbage" * 500), r"not a readable recording in .*"),
         ("MCAP file missing", lambda b: (b / f"{b.name}.mcap").unlink(), r"not a readable recording in .*"),
-        (
-            "corrupted chunk (CRC)",
-            _flip_in_chunk,
-            r"not a readable recording in .*: ReaderError while reading messages: Chunk checksum mismatch|zstd|ZstdError",
-        ),
-        (
-            "custom_data not a mapping (found by fuzzing)",
-            lambda b: (b / "metadata.yaml").write_text(
-                (b / "metadata.yaml")
-                .read_text()
-                .replace("simlan.format_version: '1.0'", "simlan.format_version; '1.0'")
-            ),
-            r"not a readable recording in .*: metadata.yaml custom_data is not a mapping of strings",
-        ),
-        (
-            "no format version",
-            lambda b: _set_custom(b, "simlan.format_version", None),
-            r"recording has no simlan_data format version in .*: metadata.yaml custom_data lacks simlan.format_version",
-        ),
-        (
-            "newer major version",
-            lambda b: _set_custom(b, "simlan.format_version", "7.0"),
-            r"recording format 7.0 is newer than this simlan_data \(1.x\) in .*; upgrade simlan_data",
-        ),
-        (
-            "older major version",
-            lambda b: _set_custom(b, "simlan.format_version", "0.9"),
-            r"recording format 0.9 is older than this simlan_data \(1.x\)",
-        ),
-        (
-            "unreadable version",
-            lambda b: _set_custom(b, "simlan.format_version", "one.two"),
-            r"recording format version unreadable in .*: 'one.two'",
-        ),
-        (
-            "missing required topics",
-            "topics",
-            r"recording lacks required topics in .*: /tf_static, /ground_truth/poses, /simlan/config, /simlan/run_info",
-        ),
+        ("corrupted chunk (CRC)", _flip_in_chunk, r"not a readable recording in .*: ReaderError while reading messages: Chunk checksum mismatch|zstd|ZstdError"),
+        ("custom_data not a mapping (found by fuzzing)", lambda b: (b / "metadata.yaml").write_text((b / "metadata.yaml") .read_text() .replace("simlan.format_version: '1.0'", "simlan.format_version; '1.0'")), r"not a readable recording in .*: metadata.yaml custom_data is not a mapping of strings"),
+        ("no format version", lambda b: _set_custom(b, "simlan.format_version", None), r"recording has no simlan_data format version in .*: metadata.yaml custom_data lacks simlan.format_version"),
+        ("newer major version", lambda b: _set_custom(b, "simlan.format_version", "7.0"), r"recording format 7.0 is newer than this simlan_data \(1.x\) in .*; upgrade simlan_data"),
+        ("older major version", lambda b: _set_custom(b, "simlan.format_version", "0.9"), r"recording format 0.9 is older than this simlan_data \(1.x\)"),
+        ("unreadable version", lambda b: _set_custom(b, "simlan.format_version", "one.two"), r"recording format version unreadable in .*: 'one.two'"),
+        ("missing required topics", "topics", r"recording lacks required topics in .*: /tf_static, /ground_truth/poses, /simlan/config, /simlan/run_info"),
     ]
 ]
+# fmt: on
 
 
 def run_recording_case(case: Case, tmp: Path) -> None:
