@@ -229,3 +229,47 @@ def check_recording(files: dict[str, bytes]) -> str:
                 n = sum(1 for _ in make_reader(f, validate_crcs=True).iter_messages())
             assert n == report.salvage.messages
         return f"{outcome}/recover:{'written' if report.written else 'intact'}"
+
+
+TARGETS = {
+    "calibration": lambda: (calibration_inputs(), check_calibration),
+    "config": lambda: (config_overrides(), check_config),
+}
+
+
+def main(argv: list[str]) -> int:
+    """``python tests/fuzz_targets.py TARGET EXAMPLES``: fuzz one target in this process.
+
+    Run by the slow tests with ``MALLOC_CHECK_=3``, so that native code corrupting the heap
+    (OpenCV's FileStorage did) aborts at once instead of crashing some later, unrelated test.
+    """
+    from collections import Counter
+
+    from hypothesis import HealthCheck, given, settings
+
+    target, examples = argv[0], int(argv[1])
+    if target == "recording":
+        from reliability_cases import small_recording
+
+        with tempfile.TemporaryDirectory() as tmp:
+            bag = small_recording(Path(tmp) / "recording")
+            files = {p.name: p.read_bytes() for p in bag.iterdir()}
+        strategy, check = recording_inputs(files), check_recording
+    else:
+        strategy, check = TARGETS[target]()
+    outcomes: Counter = Counter()
+
+    @settings(max_examples=examples, deadline=10_000, database=None, suppress_health_check=list(HealthCheck))
+    @given(strategy)
+    def run(value: object) -> None:
+        outcomes[check(value)] += 1  # type: ignore[operator]
+
+    run()
+    print(dict(outcomes))
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv[1:]))

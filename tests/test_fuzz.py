@@ -8,7 +8,10 @@ files are bounded before anything is allocated).
 
 from __future__ import annotations
 
+import ast
 import os
+import subprocess
+import sys
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
@@ -72,17 +75,22 @@ def test_fuzz_recording_reader_and_recovery(bag_files: dict[str, bytes]) -> None
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("target", ["calibration", "config", "recording"])
-def test_fuzz_large_budget(target: str, tmp_path: Path) -> None:
-    if target == "calibration":
-        _fuzz(calibration_inputs(), check_calibration, EXAMPLES_SLOW, 2000)
-    elif target == "config":
-        _fuzz(config_overrides(), check_config, EXAMPLES_SLOW // 4, 5000)
-    else:
-        bag = small_recording(tmp_path / "recording")
-        _fuzz(
-            recording_inputs({p.name: p.read_bytes() for p in bag.iterdir()}),
-            check_recording,
-            EXAMPLES_SLOW,
-            5000,
-        )
+@pytest.mark.parametrize(("target", "share"), [("calibration", 1), ("config", 4), ("recording", 1)])
+def test_fuzz_large_budget_with_heap_checks(target: str, share: int) -> None:
+    """The large budget, in a process with glibc's heap checks on (MALLOC_CHECK_=3)."""
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(Path(__file__).with_name("fuzz_targets.py")),
+            target,
+            str(EXAMPLES_SLOW // share),
+        ],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "MALLOC_CHECK_": "3"},
+        timeout=3600,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    outcomes = ast.literal_eval(proc.stdout.strip().splitlines()[-1])
+    assert sum(outcomes.values()) >= EXAMPLES_SLOW // share // 2, outcomes

@@ -36,6 +36,7 @@ MAX_DISTANCE_M = 1e4
 # OpenCV's YAML parser recurses per [ or { and crashes the process (segfault, measured at 50000
 # levels); SIMLAN's files nest 1 deep
 MAX_FLOW_DEPTH = 32
+MATRIX_TYPES = ("d", "f", "i", "u", "c", "s", "w")  # OpenCV's element type letters
 
 
 @dataclass(frozen=True)
@@ -116,10 +117,39 @@ def _flow_depth(text: str) -> int:
     return deepest
 
 
+def _matrix_header_problem(node: cv2.FileNode, size: int) -> str:
+    """Why an !!opencv-matrix node must not reach ``FileNode.mat()``, or "".
+
+    OpenCV 5 corrupts the heap (the process aborts later, at some free) on a matrix with a
+    negative ``cols`` (found by fuzzing), so the header is checked field by field first.
+    """
+    rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
+    if not (rows.isInt() and cols.isInt() and dt.isString() and data.isSeq()):
+        return "not an !!opencv-matrix with rows, cols, dt and data"
+    r, c = rows.real(), cols.real()
+    if not (1 <= r <= 64 and 1 <= c <= 64) or r * c != size:
+        return f"rows x cols is {r:g} x {c:g}, expected {size} values"
+    if dt.string() not in MATRIX_TYPES:
+        return f"dt {dt.string()!r} is not one of {', '.join(MATRIX_TYPES)}"
+    if data.size() != size:
+        return f"data has {data.size()} values, expected {size}"
+    return ""
+
+
 def _matrix(fs: cv2.FileStorage, key: str, shape: tuple[int, ...], path: Path) -> np.ndarray:
     try:
         node = fs.getNode(key)
-        mat = None if node.empty() else node.mat()
+        problem = (
+            "" if node.empty() or not node.isMap() else _matrix_header_problem(node, int(np.prod(shape)))
+        )
+        if problem:
+            raise CalibrationError(
+                f"calibration key '{key}' has the wrong shape",
+                str(path),
+                problem,
+                "fix the matrix: rows, cols, dt and as many data values as rows x cols",
+            )
+        mat = None if node.empty() or not node.isMap() else node.mat()
     except (cv2.error, SystemError):
         mat = None
     if mat is None:
