@@ -15,6 +15,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from .constants import CONF_DIR
 from .errors import EXIT_BAD_INPUT, EXIT_FAILED_RUN, SimlanError
+from .validation import config_error_from
 
 log = logging.getLogger("simlan_data")
 
@@ -76,8 +77,13 @@ def fail(message: str, code: int) -> NoReturn:
     raise SystemExit(code)
 
 
-def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
+def run_cli(
+    main: Callable[[], object], *, debug: bool = False, started: Callable[[], bool] | None = None
+) -> None:
     """Run an entry point; turn errors into one ``error: ...`` line and exit code 2 or 1.
+
+    ``started()`` tells whether the work itself began: an unexpected error before that (inside
+    Hydra's composition) is a bad argument (2), after it a failed run (1).
 
     Hydra prints multi-line reports for config errors and exits 1; with HYDRA_FULL_ERROR set
     (by us, unless the user set it) it re-raises instead, and we print one line and exit 2.
@@ -98,7 +104,7 @@ def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
     except BaseException as err:
         if debug:
             raise
-        ours = _root_simlan_error(err)
+        ours = _root_simlan_error(err) or config_error_from(err)
         if ours is not None:
             fail(ours.line(), ours.exit_code)
         bad_yaml = _in_chain(err, yaml.MarkedYAMLError)
@@ -121,6 +127,12 @@ def run_cli(main: Callable[[], object], *, debug: bool = False) -> None:
                     "conf/agents/four_robots.yaml and run with 'hydra.searchpath=[file://DIR]' agents=NAME"
                 )
             fail(f"invalid configuration: {msg}; {fix}", EXIT_BAD_INPUT)
+        if started is not None and not started():  # composing the config itself failed
+            fail(
+                f"invalid configuration in command line: {type(err).__name__}: {_first_line(str(err))}; "
+                "see --help for the valid groups and keys",
+                EXIT_BAD_INPUT,
+            )
         fail(
             f"run failed: {type(err).__name__}: {_first_line(str(err))} (rerun with --debug for the traceback)",
             EXIT_FAILED_RUN,

@@ -7,6 +7,7 @@ references when ``OmegaConf.to_object`` builds these dataclasses. Every failure 
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from typing import Any, Optional
@@ -53,6 +54,8 @@ def _choice(field_name: str, value: str, choices: tuple[str, ...]) -> None:
 
 
 def _divides(field_name: str, rate_hz: float, physics_hz: int) -> None:
+    if not rate_hz > 0:
+        raise _bad(field_name, rate_hz, "must be > 0", f"use a divisor of world.physics_hz={physics_hz}")
     steps = physics_hz / rate_hz
     if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
         whole = [d for d in range(1, physics_hz + 1) if physics_hz % d == 0]
@@ -234,6 +237,7 @@ class RecordingConfig:
     compression: str = "zstd"
     compression_level: int = 2
     flush_period_s: float = 1.0
+    fsync: bool = False  # also force each flush to the disk: bounded loss on a power cut, not just a kill
     encode_threads: int = 2
 
     def __post_init__(self) -> None:
@@ -313,7 +317,7 @@ class AgentConfig:
     """
 
     type: str = "pallet_truck"
-    pose: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    pose: list[float] = field(default_factory=list)  # [x_m, y_m, yaw_rad]; empty: not spawned
     marker_id: Optional[int] = None  # noqa: UP045 - OmegaConf needs typing.Optional
     goals: list[list[float]] = field(default_factory=list)
     speed_mps: float = 1.0
@@ -339,12 +343,27 @@ class AgentConfig:
                 "DICT_5X5_1000 has ids 0..999",
                 "use the N of robot_agent_N",
             )
+        if len(self.pose) == 0:
+            # a scenario (or an override) set goals or a speed for an agent no spawn list has
+            raise ConfigError(
+                f"unknown agent {namespace}",
+                "config",
+                "something refers to it (a scenario's goals, an override) but the spawn list does not spawn it (no pose)",
+                "choose a spawn list that has it (e.g. agents=four_robots) or add it to yours with a type and pose",
+            )
         if len(self.pose) != 3:
             raise _bad(
                 f"agents.{namespace}.pose",
                 list(self.pose),
                 "expected [x_m, y_m, yaw_rad]",
                 "give three numbers",
+            )
+        if abs(self.pose[2]) > 2 * math.pi + 1e-6:
+            raise _bad(
+                f"agents.{namespace}.pose[2]",
+                self.pose[2],
+                "yaw_rad must be within [-2 pi, 2 pi] radians (this looks like degrees)",
+                f"give radians, e.g. {math.radians(self.pose[2]):.4f}",
             )
         for i, goal in enumerate(self.goals):
             if len(goal) != 2:

@@ -34,10 +34,13 @@ FORMAT_MAJOR = 1
 #   <run>/report.md             human summary (+ report_*.png)
 #   <run>/.hydra/               Hydra's resolved config, overrides
 #   <run>/RUNNING               present while the run is in progress (absent once finished)
+#   <run>/INCOMPLETE            the run crashed and its recording was recovered (replaces RUNNING)
 RECORDING_DIRNAME = "recording"
 METRICS_FILENAME = "metrics.json"
 REPORT_FILENAME = "report.md"
 RUNNING_MARKER = "RUNNING"
+INCOMPLETE_MARKER = "INCOMPLETE"
+DAMAGED_SUFFIX = ".damaged"  # a recovered file's original is kept beside it with this suffix
 DEFAULT_OUTPUT_ROOT = "recordings"
 
 NS_PER_S = 1_000_000_000

@@ -1,6 +1,7 @@
 """``python -m simlan_data.replay RECORDING``: inspect and replay a recording without the simulator.
 
     python -m simlan_data.replay RECORDING --info
+    python -m simlan_data.replay RECORDING --recover     (same as python -m simlan_data.recover)
     python -m simlan_data.replay RECORDING --out DIR [--algorithms localization,...] [--set KEY=VALUE ...]
 
 RECORDING is a recording directory (the bag), its run directory, or its metadata.yaml. Replay
@@ -21,7 +22,9 @@ from .constants import METRICS_FILENAME, NS_PER_S
 from .errors import ConfigError
 from .evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
 from .evaluation.replay import REPLAY_ALGORITHMS, ReplayContext
+from .recording import schema
 from .recording.reader import RecordingReader
+from .recording.recover import recover
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -31,6 +34,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("recording", help="recording directory (or its run directory, or metadata.yaml)")
     parser.add_argument("--info", action="store_true", help="print a summary like `ros2 bag info` and exit")
+    parser.add_argument(
+        "--recover",
+        action="store_true",
+        help="repair the recording of a crashed run (see python -m simlan_data.recover --help) and exit",
+    )
     parser.add_argument("--out", type=Path, help="directory for the replay's metrics.json and artifacts")
     parser.add_argument(
         "--algorithms",
@@ -66,8 +74,11 @@ def parse_options(items: list[str]) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.recover:
+        print("\n".join(recover(args.recording).lines()))
+        return 0
     if not args.info and args.out is None:
-        parser.error("give --info or --out DIR")
+        parser.error("give --info, --recover or --out DIR")
     names = [n.strip() for n in args.algorithms.split(",") if n.strip()]
     unknown = [n for n in names if n not in REPLAY_ALGORITHMS]
     if unknown and not args.info:
@@ -82,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.info:
             print(reader.summary())
             return 0
+        reader.require_topics(schema.REQUIRED_TOPICS)
         out: Path = args.out
         if out.resolve() == reader.path.resolve() or reader.path.resolve() in out.resolve().parents:
             raise ConfigError(

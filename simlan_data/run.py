@@ -4,7 +4,8 @@
     python -m simlan_data.run -m KEY=A,B ...                          a sweep
 
 Run directory (``hydra.run.dir``): ``recording/`` (ROS 2 bag), ``metrics.json``, ``report.md``,
-``.hydra/``; ``RUNNING`` exists while the run is in progress.
+``.hydra/``; ``RUNNING`` exists while the run is in progress (pid, host, simulated time reached);
+after a crash, ``python -m simlan_data.recover RUN_DIR`` repairs the recording.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import json
 import logging
 import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +33,10 @@ from .evaluation.localization_replay import recording_metrics
 from .evaluation.replay import ReplayContext
 from .evaluation.report import write_report
 from .recording.reader import RecordingReader
+from .run_marker import RunMarker, write_running
 from .sim.scene import load_inputs
 from .sim.simulation import RunStats, Simulation
+from .validation import check_finite, check_references, config_error_from
 
 log = logging.getLogger("simlan_data.run")
 
@@ -41,6 +45,7 @@ register_configs()
 
 def to_config(cfg: DictConfig) -> Config:
     """Build the typed config; range and reference checks raise ConfigError."""
+    check_finite(cfg)
     try:
         obj = OmegaConf.to_object(cfg)
     except SimlanError:
@@ -51,8 +56,12 @@ def to_config(cfg: DictConfig) -> Config:
             if isinstance(cur, SimlanError):
                 raise cur from None
             cur = cur.__cause__ or cur.__context__
+        translated = config_error_from(err)
+        if translated is not None:
+            raise translated from None
         raise
     assert isinstance(obj, Config)
+    check_references(obj)
     return obj
 
 
@@ -74,7 +83,8 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
         )
     run_dir.mkdir(parents=True, exist_ok=True)
     marker = run_dir / RUNNING_MARKER
-    marker.write_text("this run has not finished; if no process writes here any more, it crashed\n")
+    running = RunMarker.for_this_process(cfg.duration_s)
+    write_running(run_dir, running)
     sim = Simulation(cfg, inputs, config_yaml=config_yaml)
     bar = tqdm(
         total=round(cfg.duration_s, 3),
@@ -86,17 +96,29 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
 
     def on_progress(t_s: float) -> None:
         bar.update(round(t_s - bar.n, 6))
+        # how far the clock got: after a crash, recovery compares it with what the file holds
+        write_running(run_dir, replace(running, simulated_s=round(t_s, 9)))
+
+    def recover_hint() -> str:
+        return f"`python -m simlan_data.recover {run_dir}` reads what was recorded" if bag.exists() else ""
 
     try:
         stats = sim.run(bag, progress=on_progress)
-    except SimlanError:
-        raise
+    except SimlanError as err:
+        if not bag.exists():  # refused before recording anything (a spawn pose in a shelf...)
+            marker.unlink(missing_ok=True)
+        if isinstance(err, ConfigError) or not recover_hint():
+            raise
+        raise RunError(
+            err.what, err.where, err.why, "; ".join(x for x in (err.fix, recover_hint()) if x)
+        ) from err
     except Exception as err:
+        hint = recover_hint()
         raise RunError(
             "simulation failed",
             str(run_dir),
             f"{type(err).__name__}: {err}",
-            "rerun with --debug for the traceback",
+            "rerun with --debug for the traceback" + (f"; {hint}" if hint else ""),
         ) from err
     finally:
         bar.close()
@@ -203,8 +225,12 @@ def execute_posemap(cfg: Config, run_dir: Path, *, config_yaml: str) -> float:
     return metrics["posemap.val.mae_rad"]
 
 
+_STARTED: list[bool] = []  # set once Hydra has composed the config and called _app
+
+
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def _app(cfg: DictConfig) -> Any:
+    _STARTED.append(True)
     typed = to_config(cfg)
     hydra_cfg = HydraConfig.get()
     run_dir = Path(hydra_cfg.runtime.output_dir)
@@ -217,7 +243,7 @@ def _app(cfg: DictConfig) -> Any:
 
 
 def main() -> None:
-    run_cli(_app)
+    run_cli(_app, started=lambda: bool(_STARTED))
 
 
 if __name__ == "__main__":

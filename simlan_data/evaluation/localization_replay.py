@@ -28,6 +28,7 @@ from .metrics import (
     localization_metrics,
     navigation_metrics,
     status_table,
+    yaw_as_recorded,
 )
 from .replay import ReplayContext, register
 
@@ -106,7 +107,8 @@ def replay_localizer(
                     )
                 )
                 if e is not None and e.valid:
-                    est_rows.append((next_tick, e.x_m, e.y_m, e.yaw_rad))
+                    # scored as the live run is: from the yaw its recorded quaternion gives back
+                    est_rows.append((next_tick, e.x_m, e.y_m, yaw_as_recorded(e.yaw_rad)))
             next_tick = next(ticks, None)
 
     topics = [f"/camera_{c}{IMAGE_SUFFIX}" for c in camera_order]

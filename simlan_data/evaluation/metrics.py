@@ -37,8 +37,20 @@ POSE_SCHEMA = {"stamp_ns": pl.Int64, "x": pl.Float64, "y": pl.Float64, "yaw": pl
 
 
 def _yaw(q: object) -> float:
-    x, y, z, w = q.x, q.y, q.z, q.w  # type: ignore[attr-defined]
+    return _yaw_xyzw(q.x, q.y, q.z, q.w)  # type: ignore[attr-defined]
+
+
+def _yaw_xyzw(x: float, y: float, z: float, w: float) -> float:
     return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def yaw_as_recorded(yaw_rad: float) -> float:
+    """The yaw a reader gets back from the planar quaternion a recording stores for ``yaw_rad``.
+
+    Replays score their estimates through this, so that they compare bit for bit with the live
+    run's metrics, which are computed from the recorded messages.
+    """
+    return _yaw_xyzw(0.0, 0.0, float(np.sin(yaw_rad / 2)), float(np.cos(yaw_rad / 2)))
 
 
 def ground_truth(reader: RecordingReader) -> dict[str, pl.DataFrame]:

@@ -11,6 +11,7 @@ disagree with K[R|t] and -R^T t the loader reports the file (SIMLAN's 500-503 ca
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,15 @@ MAX_CALIBRATION_BYTES = 1 << 20  # a calibration file is a few hundred bytes; re
 P_REL_TOL = 1e-4  # relative tolerance for P == K[R|t] (files store 17 significant digits)
 POSITION_TOL_M = 1e-3
 ROTATION_TOL = 1e-4
+# plausibility bounds: finite values outside them are typos or corruption, and would only fail
+# later (and less clearly) in projection and rendering
+MAX_FOCAL_PX = 1e6
+MAX_DISTORTION = 1e3
+MAX_DISTANCE_M = 1e4
+# OpenCV's YAML parser recurses per [ or { and crashes the process (segfault, measured at 50000
+# levels); SIMLAN's files nest 1 deep
+MAX_FLOW_DEPTH = 32
+MATRIX_TYPES = ("d", "f", "i", "u", "c", "s", "w")  # OpenCV's element type letters
 
 
 @dataclass(frozen=True)
@@ -61,6 +71,14 @@ def _read_storage(path: Path) -> cv2.FileStorage:
             f"not UTF-8 text ({err.reason})",
             "point to an OpenCV FileStorage YAML file",
         ) from err
+    depth = _flow_depth(text)
+    if depth > MAX_FLOW_DEPTH:
+        raise CalibrationError(
+            "calibration file unreadable",
+            str(path),
+            f"brackets nested {depth} deep (more than {MAX_FLOW_DEPTH}; OpenCV's parser would crash)",
+            "point to SIMLAN's calibration YAML",
+        )
     if not text.lstrip().startswith("%YAML"):
         raise CalibrationError(
             "calibration file unreadable",
@@ -70,8 +88,10 @@ def _read_storage(path: Path) -> cv2.FileStorage:
         )
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    except cv2.error as err:
-        msg = str(err).strip().splitlines()[-1] if str(err).strip() else "parse error"
+    except (cv2.error, SystemError) as err:
+        # OpenCV 5's binding reports some parse errors as SystemError with the cv2.error as cause
+        cause = err.__cause__ if isinstance(err, SystemError) and err.__cause__ is not None else err
+        msg = str(cause).strip().splitlines()[-1] if str(cause).strip() else "parse error"
         raise CalibrationError(
             "calibration file unreadable",
             str(path),
@@ -88,11 +108,49 @@ def _read_storage(path: Path) -> cv2.FileStorage:
     return fs
 
 
+def _flow_depth(text: str) -> int:
+    """Deepest nesting of [ and { in ``text`` (YAML flow collections)."""
+    depth = deepest = 0
+    for ch in re.sub(r"[^\[\]{}]", "", text):
+        depth = depth + 1 if ch in "[{" else max(0, depth - 1)
+        deepest = max(deepest, depth)
+    return deepest
+
+
+def _matrix_header_problem(node: cv2.FileNode, size: int) -> str:
+    """Why an !!opencv-matrix node must not reach ``FileNode.mat()``, or "".
+
+    OpenCV 5 corrupts the heap (the process aborts later, at some free) on a matrix with a
+    negative ``cols`` (found by fuzzing), so the header is checked field by field first.
+    """
+    rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
+    if not (rows.isInt() and cols.isInt() and dt.isString() and data.isSeq()):
+        return "not an !!opencv-matrix with rows, cols, dt and data"
+    r, c = rows.real(), cols.real()
+    if not (1 <= r <= 64 and 1 <= c <= 64) or r * c != size:
+        return f"rows x cols is {r:g} x {c:g}, expected {size} values"
+    if dt.string() not in MATRIX_TYPES:
+        return f"dt {dt.string()!r} is not one of {', '.join(MATRIX_TYPES)}"
+    if data.size() != size:
+        return f"data has {data.size()} values, expected {size}"
+    return ""
+
+
 def _matrix(fs: cv2.FileStorage, key: str, shape: tuple[int, ...], path: Path) -> np.ndarray:
     try:
         node = fs.getNode(key)
-        mat = None if node.empty() else node.mat()
-    except cv2.error:
+        problem = (
+            "" if node.empty() or not node.isMap() else _matrix_header_problem(node, int(np.prod(shape)))
+        )
+        if problem:
+            raise CalibrationError(
+                f"calibration key '{key}' has the wrong shape",
+                str(path),
+                problem,
+                "fix the matrix: rows, cols, dt and as many data values as rows x cols",
+            )
+        mat = None if node.empty() or not node.isMap() else node.mat()
+    except (cv2.error, SystemError):
         mat = None
     if mat is None:
         raise CalibrationError(
@@ -157,6 +215,30 @@ def load_calibration(camera_id: str | int, directory: Path | str | None = None) 
             str(ipath),
             f"not an upper-triangular camera matrix with fx, fy > 0 and K[2,2] = 1: {K.tolist()}",
             "restore the calibrated K",
+        )
+    if not (K[0, 0] <= MAX_FOCAL_PX and K[1, 1] <= MAX_FOCAL_PX and abs(K[0, 1]) <= MAX_FOCAL_PX) or not (
+        -width <= K[0, 2] <= 2 * width and -height <= K[1, 2] <= 2 * height
+    ):
+        raise CalibrationError(
+            "calibration K implausible",
+            str(ipath),
+            f"focal lengths must be within (0, {MAX_FOCAL_PX:g}] px and the principal point near the "
+            f"{width}x{height} image: {K.tolist()}",
+            "restore the calibrated K",
+        )
+    if np.abs(D).max() > MAX_DISTORTION:
+        raise CalibrationError(
+            "calibration D implausible",
+            str(ipath),
+            f"distortion coefficients beyond +-{MAX_DISTORTION:g}: {D.tolist()}",
+            "restore the calibrated D (k1 k2 p1 p2 k3)",
+        )
+    if np.abs(t).max() > MAX_DISTANCE_M:
+        raise CalibrationError(
+            "calibration t_vec implausible",
+            str(epath),
+            f"the camera would be over {MAX_DISTANCE_M:g} m from the origin: {t.tolist()}",
+            "restore the calibrated t_vec (metres)",
         )
     if not is_rotation_matrix(R, tol=ROTATION_TOL):
         err = float(np.abs(R.T @ R - np.eye(3)).max())

@@ -10,12 +10,12 @@ from typing import Any
 
 import yaml
 from rosbags.rosbag2 import Reader
-from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
-from ..constants import FORMAT_MAJOR, NS_PER_S
+from ..constants import FORMAT_MAJOR, NS_PER_S, RECORDING_DIRNAME
 from ..errors import RecordingInputError
+from ..run_marker import read_running, writer_alive
 from . import schema
 
 METADATA_KEY_FORMAT = "simlan.format_version"
@@ -45,10 +45,27 @@ class TopicInfo:
     count: int
 
 
-def _bad(
-    path: Path, why: str, fix: str = "record it again or run `python -m simlan_data.replay PATH --recover`"
-) -> RecordingInputError:
+def _bad(path: Path, why: str, fix: str = "") -> RecordingInputError:
+    fix = fix or f"run `python -m simlan_data.recover {path}` to rebuild what is readable, or record it again"
     return RecordingInputError("not a readable recording", str(path), why, fix)
+
+
+def _unfinished(path: Path) -> RecordingInputError:
+    """The error for a bag directory with an MCAP file but no metadata.yaml."""
+    marker = read_running(path.parent)
+    if marker is not None and writer_alive(marker):
+        return RecordingInputError(
+            "recording is still being written",
+            str(path),
+            f"process {marker.pid} is running it (simulated {marker.simulated_s:.1f} of {marker.duration_s:g} s)",
+            "wait for the run to finish",
+        )
+    return RecordingInputError(
+        "recording is unfinished",
+        str(path),
+        "an MCAP file without metadata.yaml (the run crashed or was killed)",
+        f"run `python -m simlan_data.recover {path}` to keep everything up to its last flushed chunk",
+    )
 
 
 class RecordingReader:
@@ -58,26 +75,30 @@ class RecordingReader:
         p = Path(path)
         if p.is_file() and p.name == "metadata.yaml":
             p = p.parent
-        if p.is_dir() and not (p / "metadata.yaml").exists() and (p / "recording" / "metadata.yaml").exists():
-            p = p / "recording"  # a run directory
+        if p.is_dir() and not (p / "metadata.yaml").exists() and (p / RECORDING_DIRNAME).is_dir():
+            p = p / RECORDING_DIRNAME  # a run directory
         if not p.exists():
             raise _bad(p, "no such file or directory", "check the path")
         if not (p / "metadata.yaml").is_file():
-            raise _bad(p, "no metadata.yaml (not a ROS 2 bag, or an unfinished one)")
+            if p.is_dir() and any(p.glob("*.mcap")):
+                raise _unfinished(p)
+            raise _bad(p, "no metadata.yaml (not a ROS 2 bag)", "point to a recording directory")
         self.path = p
         self._store: Typestore = schema.typestore()
+        self._metadata = _read_metadata(p)  # size and fields checked before rosbags trusts them
         try:
             self._reader = Reader(p)
             self._reader.open()
-        except (ReaderError, OSError, ValueError, KeyError, TypeError, UnicodeDecodeError) as err:
-            raise _bad(
-                p, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else 'unreadable'}"
-            ) from err
+            # rosbags parses metadata.yaml itself (YAML 1.2, where PyYAML reads 1.1) and trusts it
+            counts = [c.msgcount for c in self._reader.connections] + [
+                self._reader.message_count,
+                self._reader.start_time,
+                self._reader.end_time,
+            ]
         except Exception as err:  # rosbags raises assorted errors on corrupt input
-            raise _bad(
-                p, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else 'unreadable'}"
-            ) from err
-        self._metadata = _read_metadata(p)
+            raise _bad(p, f"{type(err).__name__}: {_first(err)}") from err
+        if not all(isinstance(n, int) and not isinstance(n, bool) for n in counts):
+            raise _bad(p, "metadata.yaml holds a message count or time that is not an integer")
         self._small: list[tuple[Any, int, bytes]] | None = None  # see STREAMED_TYPES
         self._register_bag_types()
         self.format_version = self.custom_data.get(METADATA_KEY_FORMAT, "")
@@ -89,6 +110,11 @@ class RecordingReader:
     def custom_data(self) -> dict[str, str]:
         """metadata.yaml's custom_data (format version, seed, scenario, renderer)."""
         return dict(self._metadata.get("custom_data") or {})
+
+    @property
+    def recovered(self) -> bool:
+        """True for a recording rebuilt by ``python -m simlan_data.recover`` (its run crashed)."""
+        return self.custom_data.get("simlan.recovered") == "true"
 
     @property
     def topics(self) -> dict[str, TopicInfo]:
@@ -197,8 +223,8 @@ class RecordingReader:
                     raise RecordingInputError(
                         "message undecodable",
                         f"{self.path} topic {conn.topic} at {stamp} ns",
-                        f"{type(err).__name__}: {err}",
-                        "the recording is corrupt; try --recover",
+                        f"{type(err).__name__}: {_first(err)}",
+                        f"the recording is corrupt; `python -m simlan_data.recover {self.path}` keeps its intact chunks",
                     ) from err
                 yield Message(conn.topic, int(stamp), conn.msgtype, msg)
         except RecordingInputError:
@@ -206,7 +232,7 @@ class RecordingReader:
         except Exception as err:
             raise _bad(
                 self.path,
-                f"{type(err).__name__} while reading messages: {str(err).splitlines()[0] if str(err) else ''}",
+                f"{type(err).__name__} while reading messages: {_first(err)}",
             ) from err
 
     def _raw_messages(
@@ -264,8 +290,14 @@ class RecordingReader:
             f"Start:             {self.start_ns / NS_PER_S:.3f} (simulated clock, s)",
             f"End:               {self.end_ns / NS_PER_S:.3f}",
             f"Messages:          {self.message_count}",
-            "Topic information:",
         ]
+        if self.recovered:
+            until = int(self.custom_data.get("simlan.recovered_until_ns", "0") or 0) / NS_PER_S
+            lines.append(
+                f"Recovered:         yes: the run crashed; data until {until:.3f} s, "
+                f"{self.custom_data.get('simlan.recovered_damaged_chunks', '0')} damaged chunks skipped"
+            )
+        lines.append("Topic information:")
         topics = sorted(self.topics.values(), key=lambda t: t.name)
         width = max((len(t.name) for t in topics), default=10)
         for t in topics:
@@ -294,10 +326,50 @@ def _read_metadata(path: Path) -> dict[str, Any]:
         data = yaml.safe_load(meta.read_text())
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise _bad(path, f"metadata.yaml unreadable: {_first(err)}") from err
+    except RecursionError:
+        raise _bad(path, "metadata.yaml is nested too deeply") from None
     info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
     if not isinstance(info, dict):
         raise _bad(path, "metadata.yaml lacks rosbag2_bagfile_information")
+    custom = info.get("custom_data")
+    if custom is not None and not (
+        isinstance(custom, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in custom.items())
+    ):
+        raise _bad(path, "metadata.yaml custom_data is not a mapping of strings")
+    _check_metadata_fields(path, info)
     return info
+
+
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _check_metadata_fields(path: Path, info: dict[str, Any]) -> None:
+    """The fields rosbags takes on trust: counts and times are integers, topics have names and types."""
+    for key, sub in (
+        ("message_count", None),
+        ("duration", "nanoseconds"),
+        ("starting_time", "nanoseconds_since_epoch"),
+    ):
+        value = info.get(key)
+        if sub is not None:
+            value = value.get(sub) if isinstance(value, dict) else None
+        if not _is_count(value):
+            raise _bad(path, f"metadata.yaml {key}{'.' + sub if sub else ''} is not a non-negative integer")
+    topics = info.get("topics_with_message_count")
+    if not isinstance(topics, list):
+        raise _bad(path, "metadata.yaml topics_with_message_count is not a list")
+    for i, entry in enumerate(topics):
+        meta = entry.get("topic_metadata") if isinstance(entry, dict) else None
+        if not (
+            isinstance(meta, dict)
+            and isinstance(meta.get("name"), str)
+            and isinstance(meta.get("type"), str)
+            and _is_count(entry.get("message_count"))
+        ):
+            raise _bad(
+                path, f"metadata.yaml topics_with_message_count[{i}] lacks a name, type or integer count"
+            )
 
 
 def _first(err: BaseException) -> str:

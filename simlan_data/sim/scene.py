@@ -32,6 +32,7 @@ from .dynamic_layer import MovedAgents, StaticMeshes
 from .posemap_drive import DriveInputs, load_drive_inputs
 from .pybullet_client import Client, connect
 from .rendering import CameraRenderer, LabelTable
+from .urdf_check import check_urdf
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +93,8 @@ def load_inputs(cfg: Config) -> Inputs:
     cameras, issues = load_cameras(cfg)
     placements = load_layout(cfg.world.layout, cfg.world.fidelity)
     types = {a.namespace: agent_type(a.type, where=f"agents.{a.namespace}.type") for a in cfg.agent_list}
+    for kind in sorted({t.name: t for t in types.values()}.values(), key=lambda t: t.name):
+        check_urdf(kind)
     for a in cfg.agent_list:
         check_spawn_pose(a, types[a.namespace], cfg.world.fidelity)
     check_agents_apart(cfg.agent_list, types)

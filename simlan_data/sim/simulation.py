@@ -130,6 +130,7 @@ class Simulation:
                     compression_level=cfg.recording.compression_level,
                     flush_period_ns=int(cfg.recording.flush_period_s * NS_PER_S),
                     encode_threads=cfg.recording.encode_threads,
+                    fsync=cfg.recording.fsync,
                 )
                 if cfg.recording.enabled
                 else NullWriter()

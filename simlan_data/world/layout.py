@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -9,6 +10,7 @@ import polars as pl
 
 from ..constants import LAYOUT_DIR
 from ..errors import AssetError
+from .models import MODEL_SPECS
 
 FIDELITY_LEVELS = ("empty", "light", "medium", "default")
 LAYOUT_COLUMNS = {
@@ -97,6 +99,16 @@ def load_layout(path: str | Path, fidelity: str) -> list[Placement]:
             f"{p} (model {row['model']!r}, name {row['name']!r})",
             "a pose value or the model is empty or not finite",
             "fill in x_m y_m z_m roll_rad pitch_rad yaw_rad",
+        )
+    unknown_models = sorted(set(df["model"].to_list()) - set(MODEL_SPECS))
+    if unknown_models:
+        name = unknown_models[0]
+        close = difflib.get_close_matches(name, list(MODEL_SPECS), n=1)
+        raise AssetError(
+            f"layout names an unknown model {name!r}",
+            str(p),
+            f"this twin has no geometry for it ({len(unknown_models)} unknown: {', '.join(unknown_models[:5])})",
+            f"did you mean {close[0]!r}?" if close else "use a model of simlan_data/world/models.py",
         )
     out: list[Placement] = []
     for row in df.iter_rows(named=True):
