@@ -4,6 +4,11 @@ The localizer sees exactly what the live run's localizer saw (the recorded JPEG 
 rebuilt from the recorded camera info and static transforms, the same order of calls), so with
 the same algorithm and parameters it reproduces the live estimates exactly; with other parameters
 (``--set method=pnp``) it shows what they would have given.
+
+Options (``--set``): ``method``, ``unobserved_timeout_s``, ``lost_timeout_s``,
+``processing_delay_s``, ``bias_m`` (default: the recording's ``localization`` section) and the
+camera faults ``drop_cameras``, ``yaw_error_deg``, ``yaw_error_cameras`` (default: its ``faults``
+section); ``navigation=false`` skips the navigation metrics.
 """
 
 from __future__ import annotations
@@ -144,7 +149,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
         },
     )
     wall0 = time.perf_counter()
-    localizer, tables = replay_localizer(ctx.reader, config, ctx.cameras, params)
+    localizer, tables = replay_localizer(ctx.reader, config, ctx.believed_cameras, params)
     wall = time.perf_counter() - wall0
     truth = ground_truth(ctx.reader)
     mounts, _ = marker_mounts(config)
