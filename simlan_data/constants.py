@@ -15,6 +15,7 @@ def _data_dir(packaged: str, in_repo: str) -> Path:
 
 ASSETS_DIR = _data_dir("_assets", "assets")
 CONF_DIR = _data_dir("_conf", "conf")
+EVALS_DIR = _data_dir("_evals", "evals")  # V&V suites (base.yaml) and accepted baselines
 MSG_DIR = PACKAGE_DIR / "recording" / "msg"
 
 CALIBRATION_DIR = ASSETS_DIR / "calibration"
@@ -39,5 +40,6 @@ METRICS_FILENAME = "metrics.json"
 REPORT_FILENAME = "report.md"
 RUNNING_MARKER = "RUNNING"
 DEFAULT_OUTPUT_ROOT = "recordings"
+EVALS_OUTPUT_ROOT = "recordings/evals"  # python -m simlan_data.evals SUITE writes <root>/<suite>_<time>/
 
 NS_PER_S = 1_000_000_000
