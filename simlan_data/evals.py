@@ -39,6 +39,7 @@ from .evaluation.suite import (
     plan_jobs,
     read_baseline,
     replay_all,
+    reusable,
     reuse,
     simulate,
     write_baseline,
@@ -169,6 +170,8 @@ def run_suite(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
     cases = _select(suite, args.only)
+    if args.reuse is not None:
+        reusable(args.reuse)
     out = _out_dir(args)
     jobs = plan_jobs([c for c in cases if not c.pending], out / "runs")
     t0 = time.perf_counter()

@@ -50,6 +50,9 @@ def test_paired_difference_of_unchanged_runs_is_exactly_zero() -> None:
     assert how == "paired"
     assert (diff.low, diff.high) == (0.0, 0.0)
     assert baseline_change(Bound(max=0.02, tolerance=0.001), diff, 0.011) == "same"
+    # fewer seeds than the baseline (--seeds 2): still the same runs, still paired
+    diff, how = difference_interval({0: 0.011, 1: 0.014}, base)
+    assert how == "paired" and (diff.n, diff.low, diff.high) == (2, 0.0, 0.0)
 
 
 def test_regression_is_decided_on_the_interval_not_on_one_noisy_run() -> None:

@@ -6,9 +6,9 @@ A check never rests on one run. For every (case, metric) the suite has one value
   the bound (demonstrated compliance); with a single value, that value decides.
 - **baseline** (``tolerance: T``): a regression is a change for the worse of more than T that
   the interval of the difference (current - accepted baseline) shows with confidence: the whole
-  interval lies beyond T. Paired over seeds when both have the same seeds (each seed is the same
-  run, so unchanged code differs by exactly 0), else Welch's interval. With one value each, the
-  difference itself decides.
+  interval lies beyond T. Paired over seeds when the current seeds are among the baseline's (a
+  seed is the same run, so unchanged code differs by exactly 0), else Welch's interval. With one
+  value each, the difference itself decides.
 
 Intervals are Student-t intervals (scipy) at the suite's confidence (default 0.95).
 """
@@ -58,11 +58,12 @@ def difference_interval(
 ) -> tuple[Interval, str]:
     """Interval of mean(current) - mean(baseline); values keyed by seed.
 
-    Returns the interval and how it was formed: ``paired`` (same seeds), ``welch`` or ``single``.
+    Returns the interval and how it was formed: ``paired`` (current seeds among the baseline's),
+    ``welch`` or ``single``.
     """
     cur = {s: v for s, v in current.items() if not math.isnan(v)}
     base = {s: v for s, v in baseline.items() if not math.isnan(v)}
-    if cur and set(cur) == set(base):
+    if cur and set(cur) <= set(base):  # the same seeds (or some of them): the same runs, paired
         return interval([cur[s] - base[s] for s in sorted(cur)], confidence), "paired"
     a, b = interval(list(cur.values()), confidence), interval(list(base.values()), confidence)
     if a.n == 0 or b.n == 0:

@@ -196,18 +196,32 @@ def simulate(
     return wall
 
 
-def reuse(jobs: list[Job], suite: Suite, reuse_dir: Path) -> None:
-    """Point the jobs at the runs of an earlier suite output; refuse if the overrides changed."""
-    root = reuse_dir / "runs" if (reuse_dir / "runs").is_dir() else reuse_dir
-    recorded_path = root.parent / JOBS_FILE
-    recorded = json.loads(recorded_path.read_text()) if recorded_path.is_file() else None
-    if recorded is None:
+def reusable(reuse_dir: Path) -> tuple[Path, dict[str, Any]]:
+    """The runs directory and the job table of an earlier suite output.
+
+    Raises:
+        ConfigError: ``reuse_dir`` is not the output of a suite.
+    """
+    out = reuse_dir.parent if reuse_dir.name == "runs" else reuse_dir
+    path = out / JOBS_FILE
+    if not path.is_file():
         raise ConfigError(
             "nothing to reuse",
             str(reuse_dir),
             f"no {JOBS_FILE} (not a suite output)",
             "give the --out of an earlier run",
         )
+    try:
+        return out / "runs", dict(json.loads(path.read_text()))
+    except (ValueError, TypeError) as err:
+        raise ConfigError(
+            "nothing to reuse", str(path), f"unreadable: {err}", "give the --out of an earlier run"
+        ) from err
+
+
+def reuse(jobs: list[Job], suite: Suite, reuse_dir: Path) -> None:
+    """Point the jobs at the runs of an earlier suite output; refuse if the overrides changed."""
+    root, recorded = reusable(reuse_dir)
     for job in jobs:
         if job.case.recording is not None:
             continue
@@ -281,7 +295,9 @@ def replay_all(
     if not tasks:
         return 0.0
     # longest first (the bag's size stands for its length and agents): better balance over workers
-    tasks.sort(key=lambda t: -sum(f.stat().st_size for f in (t[0].run_dir / RECORDING_DIRNAME).glob("*.mcap")))
+    tasks.sort(
+        key=lambda t: -sum(f.stat().st_size for f in (t[0].run_dir / RECORDING_DIRNAME).glob("*.mcap"))
+    )
     log(f"replaying {len(tasks)} recording x algorithm pairs ({n_jobs} workers)")
     t0 = time.perf_counter()
     results = Parallel(n_jobs=n_jobs, backend="loky")(
@@ -463,4 +479,4 @@ def write_baseline(table: pl.DataFrame, path: Path) -> None:
     if path.suffix == ".parquet":
         table.write_parquet(path, statistics=False)
     else:
-        table.write_csv(path, float_precision=9)
+        table.write_csv(path)  # full precision: an unchanged result must equal its baseline exactly

@@ -222,7 +222,9 @@ def plot_trajectories(path: Path, case: Case, jobs: list[Job], out: Path) -> tup
                 )
                 for cid, cam in ctx.cameras.items():
                     ax.plot(*cam.position[:2], marker="^", color="tab:purple", ms=5)
-                    ax.annotate(cid, (float(cam.position[0]), float(cam.position[1])), fontsize=6, color="tab:purple")
+                    ax.annotate(
+                        cid, (float(cam.position[0]), float(cam.position[1])), fontsize=6, color="tab:purple"
+                    )
                 drawn_map = True
         for i, ns in enumerate(namespaces):
             colour = colours(i % 10)
