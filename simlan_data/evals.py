@@ -15,6 +15,7 @@ regressed; 2: bad arguments. Pending checks (waiting for a capability) never cou
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import shutil
 import sys
@@ -26,7 +27,7 @@ from pathlib import Path
 import polars as pl
 
 from .cli import run_cli
-from .constants import EVALS_DIR, EVALS_OUTPUT_ROOT, METRICS_FILENAME, RECORDING_DIRNAME
+from .constants import CONF_DIR, EVALS_DIR, EVALS_OUTPUT_ROOT, METRICS_FILENAME, RECORDING_DIRNAME
 from .errors import EXIT_FAILED_RUN, ConfigError
 from .evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
 from .evaluation.suite import (
@@ -96,9 +97,15 @@ def list_suite_file(path: Path) -> str:
     for name in doc.get("suites") or {}:
         suite = load_suite(path, name)
         lines.append(f"suite {name}: {len(suite.cases)} cases, baseline {suite.baseline}")
+        listed: set[str] = set()
         for c in suite.cases:
+            cells = [x for x in suite.cases if x.family == c.family]
+            if c.family in listed:
+                continue
+            listed.add(c.family)
+            name = f"{c.family} (grid of {len(cells)})" if c.grid else c.name
             status = f"pending: {c.pending}" if c.pending else f"{len(c.seeds)} seeds, {len(c.checks)} checks"
-            lines.append(f"  {c.name:<28} {status}")
+            lines.append(f"  {name:<28} {status}")
     suite = load_suite(path, next(iter(doc.get("suites") or {})))
     lines.append("faults (--inject):")
     for f in suite.faults.values():
@@ -117,6 +124,23 @@ def _select(suite: Suite, only: list[str]) -> list[Case]:
             f"unknown case {unknown[0]!r}", "--only", f"cases: {', '.join(sorted(names))}", "pick from --list"
         )
     return [c for c in suite.cases if c.name in only or c.family in only]
+
+
+def check_launcher(name: str) -> None:
+    """Refuse a Hydra launcher that is neither built in, installed as a plugin, nor configured."""
+    if name == "basic" or (CONF_DIR / "hydra" / "launcher" / f"{name}.yaml").is_file():
+        return
+    try:
+        found = importlib.util.find_spec(f"hydra_plugins.hydra_{name}_launcher") is not None
+    except ModuleNotFoundError:
+        found = False
+    if not found:
+        raise ConfigError(
+            f"unknown launcher {name!r}",
+            "--launcher",
+            f"no Hydra plugin hydra_plugins.hydra_{name}_launcher and no conf/hydra/launcher/{name}.yaml",
+            "use joblib or basic, or install the plugin (Ray: pip install -e '.[ray]')",
+        )
 
 
 def _out_dir(args: argparse.Namespace) -> Path:
@@ -167,6 +191,7 @@ def run_suite(args: argparse.Namespace) -> int:
         raise ConfigError(
             "--reuse with --regenerate", "arguments", "regenerating simulates", "drop one of them"
         )
+    check_launcher(args.launcher)
     if args.jobs < 1:
         raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
     cases = _select(suite, args.only)

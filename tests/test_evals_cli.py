@@ -122,6 +122,7 @@ def test_reuse_replays_earlier_runs_without_simulating(tmp_path: Path) -> None:
         (["golden", "--jobs", "0"], r"invalid --jobs 0 in arguments: must be >= 1"),
         (["--file", "{tmp}/none.yaml", "base"], r"suite file missing in .*none.yaml"),
         (["golden", "--reuse", "{tmp}", "--regenerate"], r"--reuse with --regenerate in arguments"),
+        (["golden", "--launcher", "slurmish"], r"unknown launcher 'slurmish' in --launcher: no Hydra plugin"),
     ],
 )
 def test_bad_arguments_are_refused_before_anything_runs(tmp_path: Path, args: list[str], match: str) -> None:

@@ -10,8 +10,10 @@ import pytest
 
 from conftest import compose_config, run_cli
 from simlan_data.errors import ConfigError
+from simlan_data.evaluation.camera_health import CameraConsistency
 from simlan_data.evaluation.faults import CameraFaults, with_yaw_error
 from simlan_data.geometry.calibration import load_calibration
+from simlan_data.gpss.markers import MarkerObservation
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.run import to_config
 
@@ -124,3 +126,22 @@ def test_a_dropped_camera_still_records_but_never_reaches_the_localizer(tmp_path
     assert "localization.robot_agent_1.ticks_valid" in replay.stdout
     valid = float(replay.stdout.split("localization.robot_agent_1.ticks_valid")[1].split()[0])
     assert valid >= 30  # 2 s at 20 Hz: localized from the first frame on
+
+
+def obs(camera: str, x: float, y: float, marker: int = 1) -> MarkerObservation:
+    return MarkerObservation(camera, marker, x, y, 0.0, 0.01, 0.01, 0.2, 40.0)
+
+
+def test_camera_health_points_at_the_camera_that_disagrees() -> None:
+    health = CameraConsistency()
+    for k in range(20):
+        x = 0.1 * k
+        # 162 and 164 agree within 2 mm; 163 sees the marker 6 cm off (a wrong calibration)
+        health.add([obs("162", x, 0.0), obs("163", x + 0.06, 0.0), obs("164", x + 0.002, 0.0)])
+        health.add([obs("170", 5.0, 5.0, marker=2)])  # seen alone: no comparison possible
+    m = health.metrics("p.")
+    assert m["p.cameras_detecting"] == 4
+    assert m["p.camera_163.disagreement_m"] == pytest.approx(0.059)
+    assert m["p.camera_162.disagreement_m"] < 0.032 and m["p.camera_164.disagreement_m"] < 0.032
+    assert m["p.camera_disagreement_max_m"] == m["p.camera_163.disagreement_m"]
+    assert "p.camera_170.disagreement_m" not in m

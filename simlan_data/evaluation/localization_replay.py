@@ -24,6 +24,7 @@ from ..constants import NS_PER_S
 from ..gpss.localization import Localizer, LocalizerParams
 from ..gpss.markers import MarkerMount
 from ..recording.reader import RecordingReader
+from .camera_health import CameraConsistency
 from .metrics import (
     Visibility,
     estimates_from_recording,
@@ -74,9 +75,16 @@ def marker_mounts(config: dict[str, Any]) -> tuple[list[MarkerMount], dict[str, 
 
 
 def replay_localizer(
-    reader: RecordingReader, config: dict[str, Any], cameras: dict, params: LocalizerParams
+    reader: RecordingReader,
+    config: dict[str, Any],
+    cameras: dict,
+    params: LocalizerParams,
+    consistency: CameraConsistency | None = None,
 ) -> tuple[Localizer, dict[str, pl.DataFrame]]:
-    """Run the localizer over the recording; returns it and per-agent estimate tables."""
+    """Run the localizer over the recording; returns it and per-agent estimate tables.
+
+    ``consistency`` (if given) gets every frame set's per-camera observations.
+    """
     mounts, _ = marker_mounts(config)
     camera_order = [str(c) for c in (config.get("cameras") or {}).get("ids", sorted(cameras))]
     camera_order = [c for c in camera_order if c in cameras]
@@ -124,6 +132,8 @@ def replay_localizer(
             if cid in pending and localizer.search_plan(pending_t, cid):
                 localizer.process_image(pending_t, cid, jpeg=pending[cid])
         localizer.close_frame(pending_t)
+        if consistency is not None:
+            consistency.add(localizer.last_observations)
         control_until(pending_t, inclusive=True)
 
     for m in reader.messages(topics):
@@ -149,7 +159,8 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
         },
     )
     wall0 = time.perf_counter()
-    localizer, tables = replay_localizer(ctx.reader, config, ctx.believed_cameras, params)
+    consistency = CameraConsistency()
+    localizer, tables = replay_localizer(ctx.reader, config, ctx.believed_cameras, params, consistency)
     wall = time.perf_counter() - wall0
     truth = ground_truth(ctx.reader)
     mounts, _ = marker_mounts(config)
@@ -157,6 +168,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     visibility = {m.namespace: Visibility(ctx.cameras, kinds[m.namespace]) for m in mounts}
     metrics = localization_metrics(truth, tables, visibility)
     frames = [t.seconds for t in localizer.timings]
+    metrics.update(consistency.metrics("replay.localization."))
     metrics["replay.localization.wall_s"] = wall
     metrics["replay.localization.frames_processed"] = float(len(frames))
     if frames:

@@ -66,11 +66,17 @@ def _rows(summary: pl.DataFrame) -> tuple[list[dict[str, Any]], dict[str, str]]:
     """Checks to show, and the pending cases collapsed to one line each."""
     shown: list[dict[str, Any]] = []
     pending: dict[str, str] = {}
+    cells: dict[str, set[str]] = {}
     for row in summary.iter_rows(named=True):
         if row["verdict"] == "pending":
-            pending.setdefault(row["case"], row["note"])
+            family = row["case"].split("[")[0]  # the grid cells of a sweep slice: one line
+            pending.setdefault(family, row["note"])
+            cells.setdefault(family, set()).add(row["case"])
         else:
             shown.append(row)
+    for family, names in cells.items():
+        if len(names) > 1:
+            pending[f"{family} ({len(names)} grid cells)"] = pending.pop(family)
     return shown, pending
 
 
@@ -95,8 +101,9 @@ def print_table(summary: pl.DataFrame) -> None:
         if r["verdict"] in FAILING and r["note"]:
             print(f"{'':<10} {'':<22} -> {r['note']}")
     for case, note in pending.items():
-        n = summary.filter(pl.col("case") == case).height
-        print(f"{'pending':<10} {case[:22]:<22} ({n} checks not run: {note})")
+        family = case.split(" (")[0]
+        n = summary.filter(pl.col("case").str.split("[").list.first() == family).height
+        print(f"{'pending':<10} {case:<22} {n} checks not run; {note}")
     c = counts(summary)
     failed = sum(c.get(v, 0) for v in FAILING)
     print(
