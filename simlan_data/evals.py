@@ -209,9 +209,13 @@ def run_suite(args: argparse.Namespace) -> int:
             print("note: reused recordings: the faults act through the replays only (not in closed loop)")
     else:
         to_run = [j for j in jobs if j.case.recording is None]
-        timings["simulate_s"] = simulate(
-            suite, to_run, faults, out, launcher=args.launcher, n_jobs=args.jobs, extra=list(args.set)
-        )
+        try:
+            timings["simulate_s"] = simulate(
+                suite, to_run, faults, out, launcher=args.launcher, n_jobs=args.jobs, extra=list(args.set)
+            )
+        except ConfigError:
+            shutil.rmtree(out, ignore_errors=True)  # refused before any run: leave nothing behind
+            raise
     write_jobs_file(jobs, suite, faults if not args.reuse else [], out)
     collect_run_metrics(jobs)
     timings["replay_s"] = replay_all(jobs, faults, out, n_jobs=args.jobs)

@@ -151,3 +151,37 @@ def test_list_shows_cases_faults_and_what_is_pending() -> None:
     for line in proc.stdout.splitlines():
         if line.strip().startswith(("restricted_zone", "safety_condition")) and "pending" not in line:
             pytest.fail(f"not marked pending although the safety layer is missing: {line}")
+
+
+@pytest.mark.parametrize(
+    ("override", "match"),
+    [
+        (
+            "nonexistent_key=3",
+            r"invalid overrides in case c \(seed 0\): .*Key 'nonexistent_key' not in 'Config'",
+        ),
+        ("duration_s=-1", r"invalid duration_s=-1.0 in case c \(seed 0\): config: must be within"),
+    ],
+)
+def test_a_case_that_cannot_run_is_refused_before_any_run(tmp_path: Path, override: str, match: str) -> None:
+    suite = tmp_path / "s.yaml"
+    suite.write_text(
+        yaml.safe_dump(
+            {
+                "suites": {
+                    "s": {
+                        "baseline": "b.parquet",
+                        "cases": {
+                            "c": {
+                                "overrides": ["cameras=single", override],
+                                "metrics": {"run": {"navigation.collisions": {"max": 0}}},
+                            }
+                        },
+                    }
+                }
+            }
+        )
+    )
+    with pytest.raises(ConfigError, match=match):
+        evals.main(["s", "--file", str(suite), "--out", str(tmp_path / "out")])
+    assert not (tmp_path / "out").exists()

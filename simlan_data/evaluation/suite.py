@@ -128,6 +128,47 @@ def write_job_configs(suite: Suite, jobs: list[Job], conf_dir: Path) -> None:
         (group / f"{job.name}.yaml").write_text(text + yaml.safe_dump(doc, sort_keys=False))
 
 
+def check_jobs(jobs: list[Job], conf_dir: Path, overrides: list[str]) -> None:
+    """Compose and type-check every job's config as the run will (no process, no simulation).
+
+    Raises:
+        ConfigError: a case's overrides (or a fault's, or --set) do not make a valid run.
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    from ..config import register_configs
+    from ..run import to_config
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        for job in jobs:
+            where = f"case {job.case.name} (seed {job.seed})"
+            try:
+                cfg = compose(
+                    "config",
+                    overrides=[
+                        f"hydra.searchpath=[file://{conf_dir.resolve()}]",
+                        f"+{JOB_GROUP}={job.name}",
+                        *overrides,
+                    ],
+                )
+                to_config(cfg)
+            except ConfigError as err:
+                raise ConfigError(err.what, f"{where}: {err.where}", err.why, err.fix) from None
+            except (HydraException, OmegaConfBaseException) as err:
+                lines = [ln.strip() for ln in str(err.__cause__ or err).splitlines() if ln.strip()]
+                first = (
+                    " ".join(lines[:2])
+                    if lines and lines[0].endswith(":")
+                    else (lines or [type(err).__name__])[0]
+                )
+                raise ConfigError(
+                    "invalid overrides", where, first, "fix the case in the suite file"
+                ) from None
+
+
 def simulate(
     suite: Suite,
     jobs: list[Job],
@@ -144,6 +185,7 @@ def simulate(
         return 0.0
     conf_dir = out_dir / "conf"
     write_job_configs(suite, jobs, conf_dir)
+    check_jobs(jobs, conf_dir, [*(o for f in faults for o in f.run), *extra])
     runs_dir = jobs[0].run_dir.parent
     cmd = [
         sys.executable,
@@ -187,7 +229,8 @@ def simulate(
             job.error = f"run failed (see {log_path})"
             log(f"  FAILED {job.case.name} seed {job.seed}")
     if proc.returncode != 0 and all(j.error for j in jobs):
-        raise SimlanError(
+        cls = ConfigError if proc.returncode == 2 else SimlanError  # Hydra refused the overrides
+        raise cls(
             "simulation failed",
             "the suite's Hydra multirun",
             tail[0] if tail else f"exit code {proc.returncode}",
