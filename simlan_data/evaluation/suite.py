@@ -443,9 +443,9 @@ def judge(
             current = _values(table, case.name, check.source, check.metric)
             errors = sorted(
                 {
-                    f"seed {j.seed}: {j.errors[check.source]}"
+                    f"seed {j.seed}: {j.errors.get(check.source) or j.error}"
                     for j in by_case.get(case.name, [])
-                    if check.source in j.errors
+                    if check.source in j.errors or j.error
                 }
             )
             iv = interval(list(current.values()), suite.confidence)
