@@ -11,6 +11,7 @@ where: :mod:`simlan_data.viz.rerun_export` (entity tree) and :mod:`simlan_data.v
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -53,15 +54,28 @@ def main(argv: list[str] | None = None) -> int:
                 "output exists", str(save), "inspect never overwrites a file", "choose another --save"
             )
         save.parent.mkdir(parents=True, exist_ok=True)
+    else:
+        if sys.platform.startswith("linux") and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+        ):
+            raise ConfigError(
+                "no display for the Rerun viewer",
+                "this session",
+                "neither DISPLAY nor WAYLAND_DISPLAY is set",
+                "write a file with --save run.rrd and open it with `rerun run.rrd` where there is a display",
+            )
+        # the viewer executable ships with rerun-sdk next to this interpreter
+        os.environ["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")])
     t0 = time.perf_counter()
     try:
         logged = export(args.recording, save=save, spawn=save is None, image_every=args.image_every)
     except (RuntimeError, OSError) as err:
         if save is None:
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
             raise RunError(
                 "cannot start the Rerun viewer",
-                "this machine",
-                f"{type(err).__name__}: {err}",
+                "this session",
+                f"{type(err).__name__}: {first}",
                 "write a file with --save run.rrd and open it with `rerun run.rrd` where there is a display",
             ) from err
         raise

@@ -186,3 +186,12 @@ def test_inspect_refuses_what_is_not_a_recording(tmp_path: Path) -> None:
     assert proc.returncode == 2
     assert proc.stderr.startswith("error: not a readable recording in ")
     assert not (tmp_path / "x.rrd").exists()
+
+
+def test_without_save_and_without_a_display_it_says_what_to_do() -> None:
+    proc = run_cli(str(GOLDEN), module="simlan_data.inspect", env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        "error: no display for the Rerun viewer in this session: neither DISPLAY nor WAYLAND_DISPLAY is set; "
+        "write a file with --save run.rrd and open it with `rerun run.rrd` where there is a display"
+    ]
