@@ -14,8 +14,9 @@ from rosbags.typesys import Stores, get_typestore
 from conftest import REPO, run_cli
 from simlan_data.errors import ConfigError
 from simlan_data.inspect import main as inspect_main
+from simlan_data.recording.messages import compressed_image
 from simlan_data.recording.reader import RecordingReader
-from simlan_data.recording.schema import Topic
+from simlan_data.recording.schema import BIRDSEYE_IMAGE, COMPRESSED_IMAGE_TYPE, Topic
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.viz.rerun_export import export
 
@@ -141,6 +142,10 @@ def copy_with_extra_topics(src: Path, dst: Path) -> None:
             ),
         )
         out.write_serialized(events_t, 2_000_000_000, bytes(store.serialize_cdr(event, events_t.msgtype)))
+        # a bird's-eye canvas as the live topic records it (any JPEG will do)
+        jpeg = next(bag.messages(["/camera_162/image_raw/compressed"])).msg.data
+        canvas = compressed_image(3_000_000_000, "map", "rgb8; jpeg compressed bgr8", bytes(jpeg))
+        out.write(Topic(BIRDSEYE_IMAGE, COMPRESSED_IMAGE_TYPE, ""), 3_000_000_000, canvas)
 
 
 def test_zones_and_events_show_up_without_knowing_their_topics(tmp_path: Path) -> None:
@@ -156,6 +161,8 @@ def test_zones_and_events_show_up_without_knowing_their_topics(tmp_path: Path) -
     text = values["/events/safety/events"]["TextLog:text"][0][0]
     assert "stop: restricted zone ahead" in text and "robot_agent_1" in text
     assert rows["/world/cameras/163/image"] == 8  # every 10th of 71
+    assert logged["birdseye"] and rows["/birdseye/image"] == 1
+    assert values["/birdseye/image"]["EncodedImage:media_type"][0] == ["image/jpeg"]
 
 
 @pytest.mark.parametrize(
