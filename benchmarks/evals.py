@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -45,6 +46,11 @@ def evals(*args: str) -> tuple[int, float, str]:
     return proc.returncode, time.perf_counter() - t0, proc.stdout + proc.stderr
 
 
+def _what(stdout: str) -> str:
+    found = re.search(r"inspect: (\d+ cameras, \d+ images)", stdout)
+    return found.group(1) if found else "?"
+
+
 def inspect(recording: Path, rrd: Path) -> dict[str, float]:
     env = {**os.environ}
     env.pop("HYDRA_FULL_ERROR", None)
@@ -65,7 +71,11 @@ def inspect(recording: Path, rrd: Path) -> dict[str, float]:
         "wall_s": wall,
         "rrd_mib": rrd.stat().st_size / 2**20,
         "recording_mib": sum(f.stat().st_size for f in bag.glob("*.mcap")) / 2**20,
-        "summary": proc.stdout.strip().splitlines()[0],
+        "summary": proc.stdout.strip()
+        .splitlines()[0]
+        .removeprefix("inspect: ")
+        .split(", 1 agents")[0]
+        .split(" agents")[0],
     }
 
 

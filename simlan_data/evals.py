@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import os
 import shutil
 import sys
@@ -228,6 +229,7 @@ def run_suite(args: argparse.Namespace) -> int:
     summary = judge(suite, cases, jobs, table, baseline)
     timings["total_s"] = time.perf_counter() - t0
     write_tables(out, table, summary)
+    (out / "timings.json").write_text(json.dumps(timings, indent=2) + "\n")
     print_table(summary)
     if not args.no_report:
         report = write_report(

@@ -10,7 +10,6 @@ OUT/plots/*.png
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections.abc import Sequence
@@ -465,5 +464,4 @@ def write_report(
         lines.append(f"| {j.case.name} | {j.seed} | `{j.run_dir}` | {status or '-'} |")
     path = out / REPORT_NAME
     path.write_text("\n".join(lines) + "\n")
-    (out / "timings.json").write_text(json.dumps(timings, indent=2) + "\n")
     return path
