@@ -94,6 +94,9 @@ def test_reuse_replays_earlier_runs_without_simulating(tmp_path: Path) -> None:
     table = pl.read_parquet(tmp_path / "out" / "metrics.parquet")
     assert sorted(set(table["seed"])) == [0, 1]
     assert not (tmp_path / "out" / "runs").exists()  # nothing simulated
+    # an output that itself reused runs can be reused again: it says where they are
+    again = [a if a != str(earlier) else str(tmp_path / "out") for a in args]
+    assert evals.main([*again, "--out", str(tmp_path / "again")]) == 0
     # recordings made with other overrides are not silently reused
     doc["suites"]["mine"]["cases"]["two"]["overrides"] = ["scenario=default", "duration_s=20"]
     suite.write_text(yaml.safe_dump(doc))

@@ -269,7 +269,10 @@ def reuse(jobs: list[Job], suite: Suite, reuse_dir: Path) -> None:
         if job.case.recording is not None:
             continue
         entry = recorded.get(job.name)
+        # where that output found the run (itself a reuse of an earlier one), else its own runs/
         run_dir = root / job.name
+        if not run_dir.is_dir() and entry and entry.get("run_dir"):
+            run_dir = Path(entry["run_dir"])
         if entry is None or not (run_dir / RECORDING_DIRNAME).is_dir():
             job.error = f"no recording of this case and seed in {reuse_dir}"
             continue
@@ -291,7 +294,7 @@ def write_jobs_file(jobs: list[Job], suite: Suite, faults: list[Fault], out_dir:
             "seed": j.seed,
             "overrides": [*suite.overrides, *j.case.overrides],
             "faults": [f.name for f in faults],
-            "run_dir": str(j.run_dir),
+            "run_dir": str(j.run_dir.resolve()),
         }
         for j in jobs
     }
