@@ -303,9 +303,16 @@ def write_jobs_file(jobs: list[Job], suite: Suite, faults: list[Fault], out_dir:
 
 # ---------------------------------------------------------------------------------- replaying
 def replay_one(
-    recording: str, out_dir: str, algorithm: str, options: dict[str, Any]
+    recording: str, out_dir: str, algorithm: str, options: dict[str, Any], *, one_thread: bool = False
 ) -> tuple[dict[str, float], str]:
-    """Replay one recording through one algorithm (in a worker); returns (metrics, error)."""
+    """Replay one recording through one algorithm (in a worker); returns (metrics, error).
+
+    ``one_thread``: OpenCV on one thread, for workers that run side by side (no oversubscription).
+    """
+    if one_thread:
+        import cv2
+
+        cv2.setNumThreads(1)
     from ..recording.reader import RecordingReader
     from . import replay_algorithms  # noqa: F401 - registers the algorithms
     from .replay import REPLAY_ALGORITHMS, ReplayContext
@@ -352,6 +359,7 @@ def replay_all(
             str(out_dir / "replays" / job.name / algorithm),
             algorithm,
             options,
+            one_thread=n_jobs > 1,
         )
         for job, algorithm, options in tasks
     )
