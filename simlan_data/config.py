@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
+import numpy as np
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
@@ -447,6 +448,52 @@ class NavigationConfig:
 
 
 @dataclass
+class PerturbationConfig:
+    """Seeded perturbations (V&V statistics): what ``seed`` changes in a run; all 0 = none.
+
+    Each agent's spawn pose moves by a uniform offset within +-spawn_xy_m in x and y and
+    +-spawn_yaw_deg in yaw, drawn from a generator seeded by (seed, agent number): deterministic
+    per seed and independent of the other agents. Applied once, when the typed config is built,
+    so the scene, the GPSS stack and the spawn checks all see the same pose.
+    """
+
+    spawn_xy_m: float = 0.0
+    spawn_yaw_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if not 0 <= self.spawn_xy_m <= 2.0:
+            raise _bad("perturbation.spawn_xy_m", self.spawn_xy_m, "must be within 0..2 m", "use e.g. 0.15")
+        if not 0 <= self.spawn_yaw_deg <= 45.0:
+            raise _bad(
+                "perturbation.spawn_yaw_deg", self.spawn_yaw_deg, "must be within 0..45 degrees", "use e.g. 3"
+            )
+
+
+@dataclass
+class FaultsConfig:
+    """Injected faults (V&V): what the GPSS algorithms receive or believe, never the simulated world.
+
+    Rendering and the recording stay true (the cameras still see and record); the localizer is
+    given fewer images or a wrong calibration. ``localization.bias_m`` and
+    ``localization.processing_delay_s`` are the other injectable faults.
+    """
+
+    drop_cameras: list[int] = field(default_factory=list)  # their images never reach the localizer
+    yaw_error_deg: float = 0.0  # added to the believed yaw of each camera in yaw_error_cameras
+    yaw_error_cameras: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if not -30.0 <= self.yaw_error_deg <= 30.0:
+            raise _bad(
+                "faults.yaw_error_deg", self.yaw_error_deg, "must be within -30..30 degrees", "use 1.0"
+            )
+
+
+@dataclass
 class ScenarioConfig:
     name: str = "default"
     description: str = ""
@@ -470,6 +517,8 @@ class Config:
     agents: dict[str, AgentConfig] = field(default_factory=dict)
     birdseye: BirdseyeConfig = field(default_factory=BirdseyeConfig)
     posemap: PosemapConfig = field(default_factory=PosemapConfig)
+    perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
+    faults: FaultsConfig = field(default_factory=FaultsConfig)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
@@ -521,6 +570,27 @@ class Config:
             seen_marker[agent.marker_id] = ns
             ordered[ns] = agent
         self.agents = ordered
+        for cid in [*self.faults.drop_cameras, *self.faults.yaw_error_cameras]:
+            if cid not in self.cameras.ids:
+                raise _bad(
+                    "faults",
+                    cid,
+                    "not one of cameras.ids",
+                    f"use one of {', '.join(map(str, self.cameras.ids))}",
+                )
+        self._jitter_spawn_poses()
+
+    def _jitter_spawn_poses(self) -> None:
+        """Move every agent's spawn pose by its seeded offset (see PerturbationConfig)."""
+        jitter = self.perturbation
+        if jitter.spawn_xy_m == 0 and jitter.spawn_yaw_deg == 0:
+            return
+        for agent in self.agents.values():
+            rng = np.random.default_rng([self.seed, agent.number])
+            dx, dy = rng.uniform(-jitter.spawn_xy_m, jitter.spawn_xy_m, size=2)
+            dyaw = np.radians(rng.uniform(-jitter.spawn_yaw_deg, jitter.spawn_yaw_deg))
+            x, y, yaw = (float(v) for v in agent.pose)
+            agent.pose = [x + float(dx), y + float(dy), yaw + float(dyaw)]
 
     @property
     def agent_list(self) -> list[AgentConfig]:

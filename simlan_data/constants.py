@@ -15,6 +15,7 @@ def _data_dir(packaged: str, in_repo: str) -> Path:
 
 ASSETS_DIR = _data_dir("_assets", "assets")
 CONF_DIR = _data_dir("_conf", "conf")
+EVALS_DIR = _data_dir("_evals", "evals")  # V&V suites (base.yaml) and accepted baselines
 MSG_DIR = PACKAGE_DIR / "recording" / "msg"
 
 CALIBRATION_DIR = ASSETS_DIR / "calibration"
@@ -42,5 +43,6 @@ RUNNING_MARKER = "RUNNING"
 INCOMPLETE_MARKER = "INCOMPLETE"
 DAMAGED_SUFFIX = ".damaged"  # a recovered file's original is kept beside it with this suffix
 DEFAULT_OUTPUT_ROOT = "recordings"
+EVALS_OUTPUT_ROOT = "recordings/evals"  # python -m simlan_data.evals SUITE writes <root>/<suite>_<time>/
 
 NS_PER_S = 1_000_000_000

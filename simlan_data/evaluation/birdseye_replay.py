@@ -5,7 +5,9 @@
 Options (``--set``): ``x_m=[-8,34]``, ``y_m=[-10,10]``, ``px_per_m=50``, ``plane_z_m=0``,
 ``feather_m=0.2`` (default: the recording's ``birdseye`` config section, else these);
 ``eval_frames=5`` (frames scored against ground truth, spread over the recording; 0 = none);
-``ground_truth=true`` (build the recorded world in PyBullet for the orthographic ground truth).
+``ground_truth=true`` (build the recorded world in PyBullet for the orthographic ground truth);
+``drop_cameras=[163]``, ``yaw_error_deg=1 yaw_error_cameras=[163]`` (injected faults, see
+:mod:`~simlan_data.evaluation.faults`; default: the recording's ``faults`` section).
 
 Data flow::
 
@@ -37,13 +39,14 @@ from ..recording.codecs import decode_compressed, decode_raw
 from ..recording.reader import Message
 from ..world.layout import load_layout
 from .birdseye_metrics import FULL, QualityEvaluator, ground_control_points, stitcher_projections
+from .faults import CAMERA_FAULT_OPTIONS
 from .replay import ReplayContext, register
 
 REPORT_MD = "birdseye_report.md"
 REPORT_PNG = "birdseye_report.png"
 LAST_PNG = "birdseye_last.png"
 CANVAS_OPTIONS = ("x_m", "y_m", "px_per_m", "plane_z_m", "feather_m")
-OPTIONS = (*CANVAS_OPTIONS, "eval_frames", "ground_truth")
+OPTIONS = (*CANVAS_OPTIONS, "eval_frames", "ground_truth", *CAMERA_FAULT_OPTIONS)
 _TOPIC = re.compile(r"^/camera_([^/]+)/(image_raw|semantic/image_raw)(/compressed)?$")
 
 
@@ -119,7 +122,7 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
     """Stitch every frame of the recording, score some against ground truth, write a report."""
     cfg, eval_frames, with_truth = birdseye_settings(ctx)
     spec = cfg.canvas(where="replay --set")
-    cams = dict(sorted(ctx.cameras.items(), key=lambda kv: (len(kv[0]), kv[0])))
+    cams = dict(sorted(ctx.believed_cameras.items(), key=lambda kv: (len(kv[0]), kv[0])))
     if not cams:
         raise RecordingInputError(
             "recording has no cameras", str(ctx.reader.path), "no camera_info topics", "record with cameras"

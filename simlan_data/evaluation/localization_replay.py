@@ -4,6 +4,11 @@ The localizer sees exactly what the live run's localizer saw (the recorded JPEG 
 rebuilt from the recorded camera info and static transforms, the same order of calls), so with
 the same algorithm and parameters it reproduces the live estimates exactly; with other parameters
 (``--set method=pnp``) it shows what they would have given.
+
+Options (``--set``): ``method``, ``unobserved_timeout_s``, ``lost_timeout_s``,
+``processing_delay_s``, ``bias_m`` (default: the recording's ``localization`` section) and the
+camera faults ``drop_cameras``, ``yaw_error_deg``, ``yaw_error_cameras`` (default: its ``faults``
+section); ``navigation=false`` skips the navigation metrics.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from ..constants import NS_PER_S
 from ..gpss.localization import Localizer, LocalizerParams
 from ..gpss.markers import MarkerMount
 from ..recording.reader import RecordingReader
+from .camera_health import CameraConsistency
 from .metrics import (
     Visibility,
     estimates_from_recording,
@@ -72,9 +78,16 @@ def marker_mounts(config: dict[str, Any]) -> tuple[list[MarkerMount], dict[str, 
 
 
 def replay_localizer(
-    reader: RecordingReader, config: dict[str, Any], cameras: dict, params: LocalizerParams
+    reader: RecordingReader,
+    config: dict[str, Any],
+    cameras: dict,
+    params: LocalizerParams,
+    consistency: CameraConsistency | None = None,
 ) -> tuple[Localizer, dict[str, pl.DataFrame]]:
-    """Run the localizer over the recording; returns it and per-agent estimate tables."""
+    """Run the localizer over the recording; returns it and per-agent estimate tables.
+
+    ``consistency`` (if given) gets every frame set's per-camera observations.
+    """
     mounts, _ = marker_mounts(config)
     camera_order = [str(c) for c in (config.get("cameras") or {}).get("ids", sorted(cameras))]
     camera_order = [c for c in camera_order if c in cameras]
@@ -132,6 +145,8 @@ def replay_localizer(
             detections, seconds = job.result()
             localizer.observe(pending_t, cid, plan, detections, seconds)
         localizer.close_frame(pending_t)
+        if consistency is not None:
+            consistency.add(localizer.last_observations)
         control_until(pending_t, inclusive=True)
 
     with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1), thread_name_prefix="search") as pool:
@@ -158,7 +173,8 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
         },
     )
     wall0 = time.perf_counter()
-    localizer, tables = replay_localizer(ctx.reader, config, ctx.cameras, params)
+    consistency = CameraConsistency()
+    localizer, tables = replay_localizer(ctx.reader, config, ctx.believed_cameras, params, consistency)
     wall = time.perf_counter() - wall0
     truth = ground_truth(ctx.reader)
     mounts, _ = marker_mounts(config)
@@ -166,6 +182,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     visibility = {m.namespace: Visibility(ctx.cameras, kinds[m.namespace]) for m in mounts}
     metrics = localization_metrics(truth, tables, visibility)
     frames = [t.seconds for t in localizer.timings]
+    metrics.update(consistency.metrics("replay.localization."))
     metrics["replay.localization.wall_s"] = wall
     metrics["replay.localization.frames_processed"] = float(len(frames))
     if frames:

@@ -25,6 +25,7 @@ from ..geometry.camera import CameraModel
 from ..geometry.transforms import Transform
 from ..recording import schema
 from ..recording.reader import RecordingReader
+from .faults import CameraFaults
 
 
 def camera_from_messages(info: Any, map_from_camera: Any, camera_id: str) -> CameraModel:
@@ -83,7 +84,20 @@ class ReplayContext:
 
     @cached_property
     def cameras(self) -> dict[str, CameraModel]:
+        """The cameras as recorded (the truth: what rendered the images)."""
         return cameras_in_recording(self.reader)
+
+    @cached_property
+    def camera_faults(self) -> CameraFaults:
+        """Faults of the recorded run's ``faults`` section, overridden by the replay's options."""
+        return CameraFaults.from_settings(self.config, self.options)
+
+    @cached_property
+    def believed_cameras(self) -> dict[str, CameraModel]:
+        """The cameras as the algorithms are given them: without dropped ones, with injected
+        calibration errors (see :mod:`~simlan_data.evaluation.faults`). Metrics that ask what
+        the cameras could see use :attr:`cameras`."""
+        return self.camera_faults.apply(self.cameras, where=f"replay of {self.reader.path}")
 
 
 ReplayAlgorithm = Callable[[ReplayContext], dict[str, float]]

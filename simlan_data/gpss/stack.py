@@ -118,8 +118,8 @@ class GpssStack:
         self, t_ns: int, camera_id: str, *, jpeg: bytes | None = None, gray: NDArray[np.uint8] | None = None
     ) -> str | None:
         """Let the localizer search one image; returns "full"/"roi" if it did, None if it skipped."""
-        if self.source != "camera":
-            return None
+        if self.source != "camera" or camera_id not in self.localizer.cameras:
+            return None  # a camera the localizer was not given (an injected fault)
         plan = self.localizer.search_plan(t_ns, camera_id)
         if not plan:
             return None

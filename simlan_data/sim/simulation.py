@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ from .. import __version__
 from .._pybullet import pb
 from ..config import Config
 from ..constants import FORMAT_VERSION, NS_PER_S
+from ..evaluation.faults import CameraFaults
 from ..evaluation.replay import camera_from_messages
 from ..geometry.camera import CameraModel
 from ..gpss.localization import LocalizerParams
@@ -166,6 +167,10 @@ class Simulation:
             c.camera_id: camera_from_messages(M.camera_info(0, c), camera_tf(c).transform, c.camera_id)
             for c in scene.cameras
         }
+        # injected faults (V&V): the localizer loses cameras or believes a wrong calibration
+        cameras = CameraFaults.from_settings({"faults": asdict(cfg.faults)}).apply(
+            cameras, where="config faults"
+        )
         plans = [
             AgentPlan(
                 a.namespace,
