@@ -145,7 +145,8 @@ def check_launcher(name: str) -> None:
 
 
 def _out_dir(args: argparse.Namespace) -> Path:
-    out: Path = args.out or Path(EVALS_OUTPUT_ROOT) / f"{args.suite}_{datetime.now():%Y%m%d_%H%M%S}"
+    stamp = f"{datetime.now():%Y%m%d_%H%M%S}"  # audit-ok: names the output directory, as Hydra's ${now}
+    out: Path = args.out or Path(EVALS_OUTPUT_ROOT) / f"{args.suite}_{stamp}"
     if out.exists() and any(out.iterdir()):
         raise ConfigError(
             "output exists", str(out), "the suite never overwrites results", "choose another --out"

@@ -128,8 +128,8 @@ class GpssStack:
 
     def search_plan(self, t_ns: int, camera_id: str) -> str | list | None:
         """Where the localizer will search this camera's image at ``t_ns`` (None: it will not)."""
-        if self.source != "camera":
-            return None
+        if self.source != "camera" or camera_id not in self.localizer.cameras:
+            return None  # not a localizer camera (e.g. dropped by a fault): recorded, never searched
         return self.localizer.search_plan(t_ns, camera_id) or None
 
     def camera_detections(
