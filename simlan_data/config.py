@@ -12,10 +12,13 @@ from dataclasses import dataclass, field
 from typing import Any, Optional
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING
+from omegaconf import MISSING, DictConfig, OmegaConf
 
+from .config_safety import CollisionScenarioConfig, SafetyConfig
 from .errors import ConfigError
 from .gpss.birdseye import CanvasSpec
+from .gpss.safety import SafetyParams
+from .scenarios import collision as collision_scenario
 
 NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
 STREAMS = ("rgb", "depth", "semantic")
@@ -439,6 +442,8 @@ class Config:
     navigation: NavigationConfig = field(default_factory=NavigationConfig)
     agents: dict[str, AgentConfig] = field(default_factory=dict)
     birdseye: BirdseyeConfig = field(default_factory=BirdseyeConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
@@ -489,6 +494,16 @@ class Config:
             seen_marker[agent.marker_id] = ns
             ordered[ns] = agent
         self.agents = ordered
+        self.safety_params()  # namespaces named in the safety section must be agents of the run
+
+    def safety_params(self) -> SafetyParams:
+        """The safety trees' parameters for this run (rates from the run's clocks)."""
+        return self.safety.params(
+            control_rate_hz=self.control_rate_hz,
+            camera_rate_hz=self.cameras.rate_hz,
+            processing_delay_s=self.localization.processing_delay_s,
+            known_namespaces=list(self.agents),
+        )
 
     @property
     def agent_list(self) -> list[AgentConfig]:
@@ -496,7 +511,16 @@ class Config:
         return list(self.agents.values())
 
 
+def _collision_setup(key: str, *, _root_: DictConfig) -> Any:
+    """``${collision_setup:KEY}``: agent poses and goals of scenario=collision from its ``collision`` section."""
+    section = OmegaConf.to_container(_root_.collision, resolve=True)
+    assert isinstance(section, dict)
+    return collision_scenario.resolve(key, section)
+
+
 def register_configs() -> None:
     """Register the schema with Hydra's ConfigStore (conf/config.yaml lists it first)."""
     cs = ConfigStore.instance()
     cs.store(name="simlan_schema", node=Config)
+    if not OmegaConf.has_resolver("collision_setup"):
+        OmegaConf.register_new_resolver("collision_setup", _collision_setup)

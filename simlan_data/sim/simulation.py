@@ -6,8 +6,10 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
       truth tick     /clock, /ground_truth/poses
       camera tick    layered render per camera -> encode (workers) -> bag
                      JPEG -> localizer (search, detect, fuse) -> /camera_<id>/marker_detections
-      control tick   estimates -> coordinator -> navigators -> cmd_vel -> wheel motors;
-                     collision sensing; /tf, /<ns>/pose_estimate, plan, goal, status
+                     segmentation -> person detector -> /people/detections
+      control tick   collision sensing; estimates -> coordinator + safety trees -> navigators
+                     -> cmd_vel (after the safety layer) -> wheel motors; /tf, /<ns>/pose_estimate,
+                     plan, goal, status, /safety/events, /<ns>/safety_state
                      (every n-th: all frames -> bird's-eye stitcher -> JPEG -> /birdseye/image)
       physics step
 """
@@ -28,6 +30,7 @@ from ..config import Config
 from ..constants import FORMAT_VERSION, NS_PER_S
 from ..evaluation.replay import camera_from_messages
 from ..gpss.localization import LocalizerParams
+from ..gpss.people import PeopleParams
 from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
 from ..recording import messages as M
 from ..recording.writer import NullWriter, RecordingWriter
@@ -180,6 +183,14 @@ class Simulation:
                 bias_m=tuple(loc.bias_m),
             ),
             source=loc.source,
+            safety=cfg.safety_params(),
+            people=PeopleParams(
+                enabled=cfg.safety.people.enabled,
+                min_pixels=cfg.safety.people.min_pixels,
+                body_radius_m=cfg.safety.people.body_radius_m,
+                cluster_m=cfg.safety.people.cluster_m,
+                max_age_s=cfg.safety.people.max_age_s,
+            ),
         )
 
     # --------------------------------------------------------------------------- the loop
@@ -190,6 +201,7 @@ class Simulation:
         pub = Publisher(writer, cfg, scene.agents)
         pub.static(config_yaml=self.config_yaml, renderer=scene.client.backend, cameras=scene.cameras)
         stack = self._stack(scene)
+        pub.safety_zones(stack.safety.params.zones)
         recorder = CameraRecorder(
             writer,
             cfg.recording,
@@ -242,7 +254,10 @@ class Simulation:
                         pub.detections(
                             t, camera, stack.localizer.last_detections.get(camera.camera_id, []), mode
                         )
+                    stack.people_frame(camera.camera_id, images.labels)
                 stack.close_camera_tick(t)
+                if stack.last_people is not None:
+                    pub.people(t, stack.last_people)
                 stats.localize_wall_s += time.perf_counter() - loc0
                 if progress is not None:
                     progress(t / NS_PER_S)
@@ -258,14 +273,19 @@ class Simulation:
                     xy = pose.translation[:2]
                     stats.distance_m[agent.namespace] += float(np.linalg.norm(xy - last_xy[agent.namespace]))
                     last_xy[agent.namespace] = xy.copy()
-                out = stack.control(t, dt_control, truth)
+                # sensed before the control step: the safety trees read this tick's contacts
+                hits = {agent.namespace: agent.collisions(ignore, scene.names) for agent in scene.agents}
+                contacts = {ns: (hit.max_force_n, tuple(hit.others)) for ns, hit in hits.items()}
+                n_events = len(stack.safety.events)
+                out = stack.control(t, dt_control, truth, contacts)
                 if stack.source == "camera":
                     pub.estimates(t, out.estimates, stack.localizer.namespaces)
+                pub.safety(t, stack.safety, stack.safety.events[n_events:])
                 for agent in scene.agents:
                     ns = agent.namespace
                     v, w = agent.apply_command(*out.commands.get(ns, (0.0, 0.0)))
                     stack.localizer.command(t, ns, v, w)
-                    hit = agent.collisions(ignore, scene.names)
+                    hit = hits[ns]
                     if hit.in_collision and not in_contact[ns]:
                         stats.collisions[ns] += 1
                     in_contact[ns] = hit.in_collision
