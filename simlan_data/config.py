@@ -502,6 +502,7 @@ class Config:
             control_rate_hz=self.control_rate_hz,
             camera_rate_hz=self.cameras.rate_hz,
             processing_delay_s=self.localization.processing_delay_s,
+            coordinated=self.navigation.coordination,
             known_namespaces=list(self.agents),
         )
 

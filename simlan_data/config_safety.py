@@ -66,6 +66,7 @@ class TtcGuardConfig:
     slow_speed_mps: float = 0.4  # SIMLAN's crawl speed
     resume: str = "auto"
     namespaces: list[str] = field(default_factory=list)
+    robots: str = "uncoordinated"  # against other robots: uncoordinated (only while navigation.coordination is off) | always
 
 
 @dataclass
@@ -99,6 +100,7 @@ class SafetyConfig:
         control_rate_hz: float = 20.0,
         camera_rate_hz: float = 5.0,
         processing_delay_s: float = 0.0,
+        coordinated: bool = False,
         known_namespaces: list[str] | None = None,
     ) -> SafetyParams:
         """The trees' parameters; ConfigError naming the field if a value is unusable."""
@@ -109,6 +111,7 @@ class SafetyConfig:
             control_rate_hz=control_rate_hz,
             camera_rate_hz=camera_rate_hz,
             processing_delay_s=processing_delay_s,
+            coordinated=coordinated,
             known_namespaces=known_namespaces,
         )
 

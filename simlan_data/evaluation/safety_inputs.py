@@ -65,6 +65,7 @@ class SafetyRecording:
     people: list[tuple[int, list[tuple[float, float]]]]  # (stamp, fused positions)
     states: dict[str, list[str]]  # recorded safety state per tick (robots with a tree)
     events: list[SafetyEvent]
+    detections: dict[str, NDArray[np.int64]] = field(default_factory=dict)  # stamps a camera found the marker
     zones_topic: bool = False
     extras: dict[str, Any] = field(default_factory=dict)
 
@@ -105,6 +106,7 @@ def safety_params(
         control_rate_hz=float(config.get("control_rate_hz", 20.0)),
         camera_rate_hz=float((config.get("cameras") or {}).get("rate_hz", 5.0)),
         processing_delay_s=float(loc.get("processing_delay_s", 0.0)),
+        coordinated=bool((config.get("navigation") or {}).get("coordination", True)),
         known_namespaces=sorted(config.get("agents") or {}),
         where=where,
     )
@@ -197,6 +199,19 @@ def read_safety_recording(reader: RecordingReader, config: dict[str, Any]) -> Sa
         for m in reader.messages([schema.PEOPLE_DETECTIONS])
     ]
     events = [event_of(m) for m in reader.messages([schema.SAFETY_EVENTS])]
+    marker_of = {
+        ns: int(a.get("marker_id") if a.get("marker_id") is not None else ns.rsplit("_", 1)[-1])
+        for ns, a in (config.get("agents") or {}).items()
+        if ns in robots
+    }
+    found: dict[str, set[int]] = {ns: set() for ns in robots}
+    det_topics = [t for t in reader.topics if t.endswith("/marker_detections")]
+    for m in reader.messages(det_topics):
+        for marker in {int(v) for v in m.msg.ids}:
+            for ns, mid in marker_of.items():
+                if mid == marker:
+                    found[ns].add(m.stamp_ns)
+    detections = {ns: np.array(sorted(v), dtype=np.int64) for ns, v in found.items()}
     cam_rate = float((config.get("cameras") or {}).get("rate_hz", 5.0))
     camera_ns = round(NS_PER_S / cam_rate)
     camera_ticks = ticks[ticks % camera_ns == 0]
@@ -218,6 +233,7 @@ def read_safety_recording(reader: RecordingReader, config: dict[str, Any]) -> Sa
         people,
         states,
         events,
+        detections=detections,
         zones_topic=schema.SAFETY_ZONES in reader.topics,
     )
 
@@ -262,11 +278,12 @@ def _estimates(
     return out
 
 
-def truth_movers(rec: SafetyRecording, i: int, exclude: str) -> list[Any]:
-    """Every other agent at tick ``i`` as ground truth has it (for the truth-side conditions)."""
+def truth_movers(rec: SafetyRecording, i: int, exclude: str, *, robots: bool = True) -> list[Any]:
+    """Every other agent at tick ``i`` as ground truth has it (for the truth-side conditions);
+    other robots only if ``robots``."""
     out = []
     for ns, spec in rec.specs.items():
-        if ns == exclude or ns not in rec.truth:
+        if ns == exclude or ns not in rec.truth or (spec.kind == "robot" and not robots):
             continue
         tr = rec.truth[ns]
         est = RobotEstimate(tr.at(i), float(tr.speed_mps[i]), float(tr.yaw_rate_rps[i]), 0.0, 0.0, tr.at(i))

@@ -12,7 +12,9 @@ period):
   the robot was not stopped within the budget; an unobserved interval in which the robot was
   still commanded to move one budget after the timeout ran out;
 - ``safety.stops`` (transitions to stop), ``safety.false_stops``: stops whose cause was not a
-  hazard in ground truth within one budget of the stop;
+  hazard in ground truth within one budget of the stop (an ``unobserved`` stop also counts as
+  justified when no camera had found the marker for longer than the timeout, a detector dropout
+  while the marker was in view: ``safety.stops_while_visible`` counts those);
 - ``safety.max_latency_s``: over hazard onsets (ground truth) at which the robot was moving, the
   time to the robot's stop command (0 if it stopped earlier: the estimate saw it first);
 - ``safety.max_stop_distance_m``: distance the robot really travelled from a stop command to
@@ -131,7 +133,7 @@ def truth_hazards(
                 pose, float(tr.speed_mps[i]), float(tr.yaw_rate_rps[i]), 0.0, ages[i], pose
             )
             ctx.contact = rec.contacts[ns][i]
-            ctx.others = truth_movers(rec, i, ns)
+            ctx.others = truth_movers(rec, i, ns, robots=params.ttc_against_robots())
             ctx.held = SafetyDecision(st[i - 1] if i > 0 else DRIVE)
             if i > 0 and rec.plans[ns][i - 1] is not None:
                 ctx.plan = rec.plans[ns][i - 1]
@@ -163,7 +165,7 @@ def evaluate(
     violations: list[Violation] = []
     hazards: list[Hazard] = []
     out: dict[str, float] = {}
-    tot = dict.fromkeys(("stops", "slows", "false_stops", "unanswered", "moving", "standing"), 0.0)
+    tot = dict.fromkeys(("stops", "slows", "false_stops", "unanswered", "moving", "standing", "visible"), 0.0)
     stops_by_cause = dict.fromkeys(CAUSES, 0.0)
     latencies: list[float] = []
     stop_dists: list[float] = []
@@ -230,9 +232,16 @@ def evaluate(
         stops = [e for e in mine if e.action == STOP]
         false = 0
         dists = []
+        found = rec.detections.get(ns, np.zeros(0, dtype=np.int64))
         for e in stops:
             i = rec.index(e.stamp_ns)
-            if e.cause in flags and not flags[e.cause][max(0, i - tol) : i + tol + 1].any():
+            justified = e.cause not in flags or bool(flags[e.cause][max(0, i - tol) : i + tol + 1].any())
+            if e.cause == "unobserved" and not justified:
+                k = int(np.searchsorted(found, e.stamp_ns, side="right"))
+                dropout_s = (e.stamp_ns - int(found[k - 1])) / NS_PER_S if k > 0 else float("inf")
+                justified = dropout_s > params.observability.timeout_s
+                tot["visible"] += 1
+            if not justified:
                 false += 1
             stops_by_cause[e.cause] = stops_by_cause.get(e.cause, 0.0) + 1
             j = i
@@ -279,6 +288,7 @@ def evaluate(
         out[f"{prefix}.stops.{cause}"] = count
     out[f"{prefix}.slows"] = tot["slows"]
     out[f"{prefix}.false_stops"] = tot["false_stops"]
+    out[f"{prefix}.stops_while_visible"] = tot["visible"]
     out[f"{prefix}.hazards"] = float(len(hazards))
     out[f"{prefix}.hazards_unanswered"] = tot["unanswered"]
     out[f"{prefix}.max_latency_s"] = max(latencies) if latencies else float("nan")

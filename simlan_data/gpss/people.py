@@ -19,8 +19,10 @@ from ground truth. Pure numpy/OpenCV.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -43,6 +45,12 @@ class PeopleParams:
     gate_m: float = 1.5  # a detection this close to a track's prediction updates it
     max_age_s: float = 1.0  # a track not seen for longer is dropped
     radius_m: float = 0.36  # bounding circle of a person (the humanoid footprint)
+
+    @staticmethod
+    def from_dict(section: dict[str, Any] | None) -> PeopleParams:
+        """From a config's ``safety.people`` section (unknown keys ignored; defaults for the rest)."""
+        known = {f.name for f in dataclasses.fields(PeopleParams)}
+        return PeopleParams(**{k: v for k, v in (section or {}).items() if k in known})
 
 
 @dataclass(frozen=True)

@@ -251,6 +251,10 @@ class GpssStack:
                 intents.append(
                     Intent(ns, 10**6, truth[ns], self.agents[ns].kind.footprint_m, None, yields=False)
                 )
+                v, w = self._speeds.get(ns, (0.0, 0.0))
+                est = RobotEstimate(truth[ns], v, w, 0.0, 0.0, truth[ns])
+                if (m := mover_of(self.safety.specs[ns], est)) is not None:
+                    people.append(m)
         for person in people:  # where the cameras see people (never their ground truth)
             heading = float(np.arctan2(person.vy_mps, person.vx_mps))
             intents.append(
@@ -301,7 +305,7 @@ class GpssStack:
             x, y, yaw = truth[ns]
             cmd = walker.step(x, y, yaw, dt_s)
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
-        self._speeds = {ns: out.commands[ns] for ns in self.navigators}
+        self._speeds = dict(out.commands)
         return out
 
     def _detour(self, ns: str, pose: tuple[float, float, float], others: list[Intent]) -> bool:

@@ -16,6 +16,7 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -184,13 +185,7 @@ class Simulation:
             ),
             source=loc.source,
             safety=cfg.safety_params(),
-            people=PeopleParams(
-                enabled=cfg.safety.people.enabled,
-                min_pixels=cfg.safety.people.min_pixels,
-                body_radius_m=cfg.safety.people.body_radius_m,
-                cluster_m=cfg.safety.people.cluster_m,
-                max_age_s=cfg.safety.people.max_age_s,
-            ),
+            people=PeopleParams.from_dict(dataclasses.asdict(cfg.safety.people)),
         )
 
     # --------------------------------------------------------------------------- the loop

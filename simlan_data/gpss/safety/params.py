@@ -15,7 +15,19 @@ from ...errors import ConfigError
 from .geometry import Zone, make_zone
 
 RESUME_POLICIES = ("auto", "never")
+TTC_ROBOTS = ("uncoordinated", "always")
 CAUSES = ("collision", "unobserved", "restricted_area", "ttc")
+SECTION_KEYS = {
+    "enabled",
+    "namespaces",
+    "hold_s",
+    "zones",
+    "collision",
+    "observability",
+    "restricted_area",
+    "ttc",
+    "people",
+}
 
 
 @dataclass(frozen=True)
@@ -55,6 +67,9 @@ class TtcParams:
     slow_speed_mps: float = 0.4  # SIMLAN
     resume: str = "auto"
     namespaces: tuple[str, ...] = ()
+    # robots: "uncoordinated" - against other robots only while the central coordinator is off
+    # (it keeps coordinated robots apart along their plans, closer than SIMLAN's 2 m); "always"
+    robots: str = "uncoordinated"
 
 
 @dataclass(frozen=True)
@@ -72,6 +87,11 @@ class SafetyParams:
     control_period_s: float = 0.05
     camera_period_s: float = 0.2
     processing_delay_s: float = 0.0
+    coordinated: bool = False  # navigation.coordination of the run
+
+    def ttc_against_robots(self) -> bool:
+        """Whether the TTC condition looks at other robots (it always looks at people and fixed agents)."""
+        return self.ttc.robots == "always" or not self.coordinated
 
     @property
     def reaction_s(self) -> float:
@@ -103,11 +123,20 @@ class SafetyParams:
         control_rate_hz: float = 20.0,
         camera_rate_hz: float = 5.0,
         processing_delay_s: float = 0.0,
+        coordinated: bool = False,
         known_namespaces: Sequence[str] | None = None,
         where: str = "safety",
     ) -> SafetyParams:
         """Params from a config section (plain dict); ConfigError naming the field if it is bad."""
         s = dict(section or {})
+        unknown_keys = sorted(set(s) - SECTION_KEYS)
+        if unknown_keys:
+            raise ConfigError(
+                f"unknown key {where}.{unknown_keys[0]}",
+                "config",
+                f"known: {', '.join(sorted(SECTION_KEYS))}",
+                "check the spelling",
+            )
         zones = tuple(
             make_zone(
                 str(z.get("name", "")),
@@ -180,6 +209,13 @@ class SafetyParams:
                 "slow_speed_mps": (0.0, 3.0),
             },
         )
+        if ttc.robots not in TTC_ROBOTS:
+            raise ConfigError(
+                f"invalid {where}.ttc.robots={ttc.robots!r}",
+                "config",
+                f"expected one of {', '.join(TTC_ROBOTS)}",
+                f"set {where}.ttc.robots=uncoordinated",
+            )
         if ttc.slow_ttc_s < ttc.stop_ttc_s:
             raise ConfigError(
                 f"invalid {where}.ttc.slow_ttc_s={ttc.slow_ttc_s!r}",
@@ -204,6 +240,7 @@ class SafetyParams:
             control_period_s=1.0 / control_rate_hz,
             camera_period_s=1.0 / camera_rate_hz,
             processing_delay_s=processing_delay_s,
+            coordinated=coordinated,
         )
         if known_namespaces is not None:
             params.check_namespaces(known_namespaces, where=where)

@@ -286,7 +286,8 @@ class SafetyLayer:
         }
         for ns, tree in self.trees.items():
             est = world.estimates.get(ns, RobotEstimate(None))
-            others = [m for o, m in movers.items() if o != ns] + list(world.people) + self.static
+            robots = [m for o, m in movers.items() if o != ns] if self.params.ttc_against_robots() else []
+            others = robots + list(world.people) + self.static
             before = self.decisions[ns]
             decision = tree.tick(
                 world.stamp_ns,
