@@ -6,7 +6,9 @@ Data flow per camera tick::
         |  each blob's pixels -> rays (camera model, with distortion) -> floor plane z = 0
         v
     foot point: the blob's floor point nearest the camera's nadir (the body above the feet
-        projects further out), moved one body radius outwards --> one detection per camera
+        projects further out), moved one body radius outwards; a blob whose floor projection is
+        much shorter than a whole person's would be (legs or head hidden behind a shelf, cut by
+        the image border) is dropped: its foot point would be wrong --> detections per camera
         v
     fuse across cameras (greedy clusters) --> positions (recorded on /people/detections)
         v
@@ -45,6 +47,8 @@ class PeopleParams:
     gate_m: float = 1.5  # a detection this close to a track's prediction updates it
     max_age_s: float = 1.0  # a track not seen for longer is dropped
     radius_m: float = 0.36  # bounding circle of a person (the humanoid footprint)
+    height_m: float = 1.7  # a whole person's height, for the completeness check
+    min_extent: float = 0.6  # a blob must span this share of a whole person's floor projection
 
     @staticmethod
     def from_dict(section: dict[str, Any] | None) -> PeopleParams:
@@ -76,25 +80,38 @@ class PersonDetector:
         count, blobs, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
         cam = self.cameras[camera_id]
         nadir = cam.position[:2]
+        height = float(cam.position[2])
         out = []
         for i in range(1, count):
             area = int(stats[i, cv2.CC_STAT_AREA])
             if area < p.min_pixels:
                 continue
-            x, y, w, h = (int(stats[i, k]) for k in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, 3, 4))
+            x, y, w, h = (
+                int(stats[i, k])
+                for k in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH, cv2.CC_STAT_HEIGHT)
+            )
+            if x <= 0 or y <= 0 or x + w >= labels.shape[1] or y + h >= labels.shape[0]:
+                continue  # cut by the image border
             vs, us = np.nonzero(blobs[y : y + h, x : x + w] == i)
             step = max(1, len(us) // p.max_pixels)
             uv = np.stack([us[::step] + x, vs[::step] + y], axis=1).astype(np.float64)
             floor, ok = cam.intersect_plane_z(uv, 0.0)
-            floor = floor[ok, :2]
-            if len(floor) < 3:
-                continue
+            if not ok.all():
+                continue  # reaches into the lens's invalid border
+            floor = floor[:, :2]
             d = np.linalg.norm(floor - nadir, axis=1)
-            near = floor[d <= np.quantile(d, 0.05) + 1e-9]
+            d_near, d_far = float(np.quantile(d, 0.05)), float(np.quantile(d, 0.95))
+            near = floor[d <= d_near + 1e-9]
             foot = near.mean(axis=0)
             outward = floor.mean(axis=0) - nadir
             n = float(np.hypot(outward[0], outward[1]))
             centre = foot + (outward / n) * p.body_radius_m if n > 1e-6 else foot
+            # a whole person of height h standing at D projects onto the floor from D to D*H/(H-h)
+            dist = float(np.hypot(*(centre - nadir)))
+            if height > p.height_m and dist > 1.0:
+                whole = dist * p.height_m / (height - p.height_m)
+                if d_far - d_near < p.min_extent * whole:
+                    continue  # partly hidden: the lowest visible point need not be a foot
             out.append(PersonDetection(camera_id, float(centre[0]), float(centre[1]), area))
         return out
 
