@@ -25,7 +25,7 @@ class ZoneConfig:
     """A restricted area: corners [x_m, y_m] in the map frame, in order around it."""
 
     name: str = ""
-    polygon: list[list[float]] = field(default_factory=list)
+    polygon: list[Any] = field(default_factory=list)  # [[x_m, y_m], ...]; checked by make_zone (ints welcome)
     namespaces: list[str] = field(default_factory=list)  # robots it applies to; empty: every robot
 
 

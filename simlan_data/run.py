@@ -24,6 +24,7 @@ from .cli import run_cli
 from .config import Config, register_configs
 from .constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from .errors import ConfigError, RunError, SimlanError
+from .evaluation import safety_sweep  # noqa: F401 - registers the collision sweep report
 from .evaluation.localization_replay import recording_metrics
 from .evaluation.replay import ReplayContext
 from .evaluation.report import write_report

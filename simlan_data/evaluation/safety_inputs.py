@@ -138,8 +138,10 @@ def _truth_at(table: Any, ticks: NDArray[np.int64]) -> Truth:
 
 def event_of(m: Any) -> SafetyEvent:
     e = m.msg
-    pose = (e.pose.position.x, e.pose.position.y, _yaw(e.pose.orientation)) if e.pose_valid else None
-    return SafetyEvent(m.stamp_ns, e.namespace, e.cause, e.action, pose, e.speed_mps, e.detail, e.other)
+    pose = (e.pose.position.x, e.pose.position.y, _yaw(e.pose.orientation))
+    return SafetyEvent(
+        m.stamp_ns, e.namespace, e.cause, e.action, pose, e.speed_mps, e.detail, e.other, e.pose_valid
+    )
 
 
 def read_safety_recording(reader: RecordingReader, config: dict[str, Any]) -> SafetyRecording:

@@ -11,9 +11,10 @@ Jackal's heading relative to the truck's), a truck speed and a ``collision_type`
 and at 0 degrees (catch-up) the faster robot's front meets the slower one's back. Here both
 robots are GPSS robots steered by the cameras through a goal beyond the collision point; they
 set off together and accelerate as the path follower does, so each start lies the distance it
-covers in ``time_s`` (with that acceleration) before its pose at the moment of contact. The
-contact points overlap by ``overlap_m`` so that small timing errors still end in a collision
-when nothing stops them (SIMLAN's points touch exactly).
+covers in ``time_s`` (with that acceleration) before its pose at the moment of contact. At that
+moment the striking front is ``overlap_m`` past the contact point (half of it each, head-on), so
+that small timing errors still end in a collision when nothing stops them (SIMLAN's points
+touch exactly).
 
 Pure numpy: the config resolver ``${collision_setup:KEY}`` turns the ``collision`` section into
 agent poses and goals, so the recorded config holds the resolved numbers.
@@ -80,12 +81,12 @@ def collision_setup(
     sin_a = float(np.sin(a))
     closing = True
     if abs(sin_a) < 1e-6 and np.cos(a) < 0:  # 180: head-on along one line, front centres meet
-        t_local, j_local = (tx1 + overlap_m / 2, 0.0), (jx1 + overlap_m / 2, 0.0)
+        t_local, j_local = (tx1 - overlap_m / 2, 0.0), (jx1 - overlap_m / 2, 0.0)
     elif abs(sin_a) < 1e-6:  # 0: catch-up, the faster front meets the slower back
         if truck_speed_mps > jackal_speed_mps:
-            t_local, j_local = (tx1 + overlap_m, 0.0), (jx0, 0.0)
+            t_local, j_local = (tx1 - overlap_m, 0.0), (jx0, 0.0)
         elif truck_speed_mps < jackal_speed_mps:
-            t_local, j_local = (tx0, 0.0), (jx1 + overlap_m, 0.0)
+            t_local, j_local = (tx0, 0.0), (jx1 - overlap_m, 0.0)
         else:  # same speed: they never close in; the Jackal drives 1 m ahead of the truck
             t_local, j_local = (tx1, 0.0), (jx0 - 1.0, 0.0)
             closing = False
@@ -93,13 +94,13 @@ def collision_setup(
         side_t = -1.0 if sin_a > 0 else 1.0  # the Jackal comes from the truck's right (or left)
         side_j = 1.0 if sin_a > 0 else -1.0  # the Jackal's side that faces the oncoming truck
         if collision_type == HEAD_ON:
-            t_local = (tx1 + overlap_m / 2, side_t * ty1)
-            j_local = (jx1 + overlap_m / 2, side_j * jy1)
+            t_local = (tx1 - overlap_m / 2, side_t * ty1)
+            j_local = (jx1 - overlap_m / 2, side_j * jy1)
         elif collision_type == PALLET_TRUCK_SIDE:
             t_local = (0.5 * (tx0 + tx1), side_t * ty1)
-            j_local = (jx1 + overlap_m, 0.0)
+            j_local = (jx1 - overlap_m, 0.0)
         elif collision_type == JACKAL_SIDE:
-            t_local = (tx1 + overlap_m, 0.0)
+            t_local = (tx1 - overlap_m, 0.0)
             j_local = (0.5 * (jx0 + jx1), side_j * jy1)
         else:
             raise ValueError(f"unknown collision_type {collision_type}")

@@ -239,7 +239,7 @@ def safety_event_msg(ev: SafetyEvent) -> Any:
         cause=ev.cause,
         action=ev.action,
         pose=ev.pose,
-        pose_valid=ev.pose is not None,
+        pose_valid=ev.pose is not None and ev.pose_valid,
         speed_mps=ev.speed_mps,
         other=ev.other,
         detail=ev.detail,

@@ -100,10 +100,11 @@ class SafetyEvent:
     namespace: str
     cause: str
     action: str  # stop | slow | resume
-    pose: Pose2D | None
+    pose: Pose2D | None  # the estimate, or where the robot was last known if there is none
     speed_mps: float
     detail: str
     other: str = ""
+    pose_valid: bool = True  # False: no valid estimate at that tick (pose is the last known one)
 
 
 @dataclass(frozen=True)

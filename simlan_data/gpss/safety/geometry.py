@@ -48,10 +48,14 @@ def make_zone(
     """A zone from its corners (in order around it); ConfigError naming ``where`` if unusable."""
     if not name:
         raise ConfigError(f"invalid {where}.name=''", "config", "every zone needs a name", "add name: ...")
-    pts = [list(p) for p in points]
-    if any(len(p) != 2 for p in pts):
+    try:
+        pts = [[float(v) for v in p] for p in points]
+        corners_ok = all(len(p) == 2 for p in pts)
+    except (TypeError, ValueError):
+        corners_ok = False
+    if not corners_ok:
         raise ConfigError(
-            f"invalid {where}.polygon={pts}",
+            f"invalid {where}.polygon={list(points)}",
             "config",
             "every corner must be [x_m, y_m] in the map frame",
             "give two numbers per corner",

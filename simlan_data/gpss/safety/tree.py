@@ -313,6 +313,7 @@ class SafetyLayer:
                         est.speed_mps,
                         detail,
                         decision.other if decision.state != DRIVE else before.other,
+                        est.pose is not None,
                     )
                 )
         return dict(self.decisions)
