@@ -14,11 +14,14 @@ Jackal's path it turns "entered" into "prevented"; bad zones are refused with on
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
-from mcap_ros2.reader import read_ros2_messages
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 from shapely.geometry import Polygon
 
 from conftest import run_cli
@@ -66,10 +69,21 @@ def safety_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return run_dir
 
 
-def _read(run_dir: Path, topics: list[str]) -> list:
+@dataclass
+class _Msg:
+    log_time_ns: int
+    ros_msg: Any
+
+
+def _read(run_dir: Path, topics: list[str]) -> list[_Msg]:
+    """Messages of ``topics`` decoded by mcap + mcap_ros2 (not simlan_data's reader)."""
     mcap = next((run_dir / "recording").glob("*.mcap"))
     with mcap.open("rb") as f:
-        return list(read_ros2_messages(f, topics=topics))
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        return [
+            _Msg(message.log_time, decoded)
+            for _, _, message, decoded in reader.iter_decoded_messages(topics=topics, log_time_order=True)
+        ]
 
 
 def _truth(run_dir: Path, ns: str) -> np.ndarray:
