@@ -32,7 +32,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import REPO, machine, run_cli, table
-
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.replay import ReplayContext
 from simlan_data.evaluation.safety_inputs import read_safety_recording
@@ -75,7 +74,16 @@ def replay(recording: Path, out: Path, *sets: str) -> dict[str, float]:
     if not (out / "metrics.json").is_file():
         env = {**os.environ}
         env.pop("HYDRA_FULL_ERROR", None)
-        cmd = [sys.executable, "-m", "simlan_data.replay", str(recording), "--out", str(out), "--algorithms", "safety"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "simlan_data.replay",
+            str(recording),
+            "--out",
+            str(out),
+            "--algorithms",
+            "safety",
+        ]
         for s in sets:
             cmd += ["--set", s]
         proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, env=env, check=False)
@@ -101,7 +109,11 @@ def blind_figures(run_dir: Path, stop_ns: int | None = None) -> dict[str, float]
             j += 1
         path = np.hypot(*np.diff(tr.pose[leave : j + 1, :2], axis=0).T).sum()
         est = rec.estimates["robot_agent_1"][i_stop]
-        err = float(np.hypot(est.pose[0] - tr.pose[i_stop, 0], est.pose[1] - tr.pose[i_stop, 1])) if est.pose else float("nan")
+        err = (
+            float(np.hypot(est.pose[0] - tr.pose[i_stop, 0], est.pose[1] - tr.pose[i_stop, 1]))
+            if est.pose
+            else float("nan")
+        )
         return {
             "left_view_s": float(rec.ticks[leave] / NS_PER_S),
             "stop_s": float(stop_ns / NS_PER_S),
@@ -109,6 +121,33 @@ def blind_figures(run_dir: Path, stop_ns: int | None = None) -> dict[str, float]
             "estimate_error_at_stop_m": err,
             "stop_x_m": float(tr.pose[j, 0]),
         }
+
+
+def people_accuracy(run_dir: Path, ns: str = "robot_agent_2") -> dict[str, float]:
+    """Error of /people/detections against the person's ground truth, per camera tick."""
+    from simlan_data.evaluation.metrics import ground_truth
+    from simlan_data.recording import schema
+
+    with RecordingReader(run_dir / "recording") as reader:
+        gt = ground_truth(reader)[ns]
+        t, x, y = (gt[c].to_numpy() for c in ("stamp_ns", "x", "y"))
+        errors, frames, ghosts = [], 0, 0
+        for m in reader.messages([schema.PEOPLE_DETECTIONS]):
+            frames += 1
+            i = min(int(np.searchsorted(t, m.stamp_ns)), len(t) - 1)
+            d = [float(np.hypot(p.position.x - x[i], p.position.y - y[i])) for p in m.msg.poses]
+            if d:
+                errors.append(min(d))
+                ghosts += sum(1 for v in d if v > 0.5)
+    e = np.array(errors)
+    return {
+        "frames": float(frames),
+        "found": float(len(e)),
+        "median_m": float(np.median(e)) if len(e) else float("nan"),
+        "p90_m": float(np.quantile(e, 0.9)) if len(e) else float("nan"),
+        "max_m": float(e.max()) if len(e) else float("nan"),
+        "ghosts": float(ghosts),
+    }
 
 
 def main() -> None:
@@ -138,8 +177,12 @@ def main() -> None:
                 int(m["safety.false_stops"]),
                 f"{m['safety.max_latency_s']:.2f} / {m['safety.latency_budget_s']:.2f}",
                 f"{m['safety.max_stop_distance_m']:.2f}",
-                f"{m['safety.min_clearance_zone_m']:.2f}" if np.isfinite(m["safety.min_clearance_zone_m"]) else "-",
-                f"{m['safety.min_clearance_agents_m']:.2f}" if np.isfinite(m["safety.min_clearance_agents_m"]) else "-",
+                f"{m['safety.min_clearance_zone_m']:.2f}"
+                if np.isfinite(m["safety.min_clearance_zone_m"])
+                else "-",
+                f"{m['safety.min_clearance_agents_m']:.2f}"
+                if np.isfinite(m["safety.min_clearance_agents_m"])
+                else "-",
                 f"{int(m['safety.collisions_moving'])} / {int(m['safety.collisions_standing'])}",
                 f"{int(m['navigation.goals_reached'])}/{int(m['navigation.goals_total'])}",
             ]
@@ -166,6 +209,16 @@ def main() -> None:
         "",
     ]
 
+    people = people_accuracy(out / "humanoid_crossing")
+    raw["people"] = people
+    md += [
+        f"People from the segmentation images (humanoid_crossing, {int(people['frames'])} camera ticks): "
+        f"person found in {int(people['found'])}, error median {people['median_m'] * 100:.1f} cm, "
+        f"90th percentile {people['p90_m'] * 100:.1f} cm, max {people['max_m'] * 100:.1f} cm, "
+        f"{int(people['ghosts'])} detections farther than 0.5 m from the person.",
+        "",
+    ]
+
     # 2. observability timeouts, live and counterfactual
     timeouts = [float(t) for t in args.timeouts.split(",")]
     base = out / "blind_spot"
@@ -173,7 +226,11 @@ def main() -> None:
     raw["timeouts"] = {}
     for t in timeouts:
         live_dir = base if t == 5.0 else out / f"blind_spot_timeout_{t:g}"
-        metrics = scen["blind_spot"] if t == 5.0 else run(out, live_dir.name, "scenario=blind_spot", f"safety.observability.timeout_s={t}")
+        metrics = (
+            scen["blind_spot"]
+            if t == 5.0
+            else run(out, live_dir.name, "scenario=blind_spot", f"safety.observability.timeout_s={t}")
+        )
         live = blind_figures(live_dir)
         cf: dict[str, Any] = {}
         if t != 5.0:
@@ -184,8 +241,15 @@ def main() -> None:
             ev = pl.read_parquet(cf_out / "safety_events.parquet").filter(
                 (pl.col("action") == "stop") & (pl.col("cause") == "unobserved")
             )
-            cf = {"stop_s": float(ev["stamp_ns"][0] / NS_PER_S) if ev.height else float("nan"), **{k: cf_metrics[k] for k in ("replay.safety.events_diff_to_live",)}}
-        raw["timeouts"][f"{t:g}"] = {"live": live, "counterfactual": cf, "max_latency_s": metrics["safety.max_latency_s"]}
+            cf = {
+                "stop_s": float(ev["stamp_ns"][0] / NS_PER_S) if ev.height else float("nan"),
+                **{k: cf_metrics[k] for k in ("replay.safety.events_diff_to_live",)},
+            }
+        raw["timeouts"][f"{t:g}"] = {
+            "live": live,
+            "counterfactual": cf,
+            "max_latency_s": metrics["safety.max_latency_s"],
+        }
         trows.append(
             [
                 f"{t:g}",
@@ -230,8 +294,15 @@ def main() -> None:
             wall = time.perf_counter() - wall0
             text = (sweep_dir / "collision_sweep.md").read_text()
             raw["sweeps"][exp] = {"wall_s": wall, "report": str(sweep_dir / "collision_sweep.md")}
-            body = text.split("\n", 2)[2].replace("](collision_sweep.png)", f"]({sweep_dir / 'collision_sweep.png'})")
-            md += [f"### `python -m simlan_data.run -m experiment={exp}` ({wall / 60:.1f} min wall)", "", body, ""]
+            body = text.split("\n", 2)[2].replace(
+                "](collision_sweep.png)", f"]({sweep_dir / 'collision_sweep.png'})"
+            )
+            md += [
+                f"### `python -m simlan_data.run -m experiment={exp}` ({wall / 60:.1f} min wall)",
+                "",
+                body,
+                "",
+            ]
 
     raw["load_average_end"] = os.getloadavg()
     raw["wall_s"] = time.perf_counter() - t0

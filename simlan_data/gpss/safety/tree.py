@@ -232,7 +232,7 @@ class RobotSafetyTree:
         return ctx.decision
 
     def ascii(self) -> str:
-        return str(py_trees.display.unicode_tree(self.root))
+        return str(py_trees.display.ascii_tree(self.root))
 
 
 # ---------------------------------------------------------------------------------- layer
