@@ -41,6 +41,10 @@ def collision_table(table: pl.DataFrame) -> pl.DataFrame:
             _col(table, "safety.min_clearance_agents_m", None).cast(pl.Float64).alias("min_gap_m"),
             _col(table, "safety.stops", None).cast(pl.Float64).alias("stops"),
             _col(table, "safety.missed", None).cast(pl.Float64).alias("missed"),
+            _col(table, "safety.slows", None).cast(pl.Float64).alias("slows"),
+            _col(table, "safety.false_stops", None).cast(pl.Float64).alias("false_stops"),
+            _col(table, "safety.max_latency_s", None).cast(pl.Float64).alias("max_latency_s"),
+            _col(table, "localization.ate_xy_rmse_m", None).cast(pl.Float64).alias("ate_m"),
         )
         .with_columns((pl.col("collisions") > 0).alias("collided"))
         .sort(["collision_type", "angle", "truck_speed_mps", "guarded"])
@@ -78,6 +82,16 @@ def summarize(cases: pl.DataFrame) -> list[str]:
             would = int(joined["base"].sum() or 0)
             avoided = int((joined["base"] & ~joined["collided"]).sum() or 0)
             line += f"; of the {would} cases that collide unguarded, {avoided} avoided"
+        if g != "none" and n:
+            lat = sub["max_latency_s"].drop_nans().drop_nulls()
+            line += (
+                f"; {int(sub['stops'].sum() or 0)} stops, {int(sub['slows'].sum() or 0)} slow-downs, "
+                f"{int(sub['false_stops'].sum() or 0)} false stops, "
+                f"max latency {lat.max() if len(lat) else float('nan'):.2f} s"
+            )
+        ate = sub["ate_m"].drop_nans().drop_nulls()
+        if len(ate):
+            line += f"; localization ATE at most {ate.max() * 100:.1f} cm"
         lines.append(line)
     return lines
 
