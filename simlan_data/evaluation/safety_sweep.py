@@ -45,6 +45,12 @@ def collision_table(table: pl.DataFrame) -> pl.DataFrame:
             _col(table, "safety.false_stops", None).cast(pl.Float64).alias("false_stops"),
             _col(table, "safety.max_latency_s", None).cast(pl.Float64).alias("max_latency_s"),
             _col(table, "localization.ate_xy_rmse_m", None).cast(pl.Float64).alias("ate_m"),
+            pl.min_horizontal(
+                _col(table, "localization.robot_agent_1.ticks_valid", None),
+                _col(table, "localization.robot_agent_2.ticks_valid", None),
+            )
+            .cast(pl.Float64)
+            .alias("localized_ticks"),
         )
         .with_columns((pl.col("collisions") > 0).alias("collided"))
         .sort(["collision_type", "angle", "truck_speed_mps", "guarded"])
@@ -65,18 +71,29 @@ def summarize(cases: pl.DataFrame) -> list[str]:
                 cells.append("-")
             elif row["status"][0] != "ok" or row["collisions"][0] is None:
                 cells.append("failed")
+            elif row["localized_ticks"][0] is not None and row["localized_ticks"][0] == 0:
+                cells.append("not localized")  # a robot never seen by the cameras: no valid case
             else:
                 gap = row["min_gap_m"][0]
                 cells.append(("**collision**" if row["collided"][0] else "no contact") + f" ({gap:.2f} m)")
         lines.append(
             f"| {TYPES.get(int(ctype), ctype)} | {angle:g} | {speed:g} | " + " | ".join(cells) + " |"
         )
-    lines += ["", "Totals (cells above: outcome and the smallest gap between the two footprints):", ""]
+    lines += [
+        "",
+        "Totals (cells above: outcome and the smallest gap between the two footprints; 'not localized': "
+        "a robot the cameras never found, the case says nothing about the safety layer):",
+        "",
+    ]
     base = cases.filter(pl.col("guarded") == "none").select([*KEYS, pl.col("collided").alias("base")])
     for g in guards:
         sub = cases.filter((pl.col("guarded") == g) & (pl.col("status") == "ok"))
+        lost = sub.filter(pl.col("localized_ticks") == 0).height
+        sub = sub.filter(pl.col("localized_ticks").is_null() | (pl.col("localized_ticks") > 0))
         n, hit = sub.height, int(sub["collided"].sum() or 0)
-        line = f"- guarded {g}: {hit} of {n} runs collided"
+        line = f"- guarded {g}: {hit} of {n} runs collided" + (
+            f" ({lost} not localized, left out)" if lost else ""
+        )
         if g != "none" and base.height:
             joined = sub.join(base, on=list(KEYS), how="inner")
             would = int(joined["base"].sum() or 0)

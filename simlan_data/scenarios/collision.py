@@ -32,6 +32,7 @@ HEAD_ON, PALLET_TRUCK_SIDE, JACKAL_SIDE = 0, 1, 2
 TRUCK_NS, JACKAL_NS = "robot_agent_1", "robot_agent_2"
 GUARDED = ("both", "jackal", "truck", "none")
 FOLLOWER_ACCEL_MPS2 = 0.6  # PursuitParams.accel_mps2: how the GPSS path follower speeds up
+RUN_ON_M = 5.0  # each goal lies this far past the meeting point
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,7 @@ def collision_setup(
     point_xy: tuple[float, float] = (5.5, 1.0),
     time_s: float = 3.0,
     overlap_m: float = 0.1,
-    run_on_m: float = 5.0,
+    run_on_m: float = RUN_ON_M,
 ) -> CollisionSetup:
     """Start poses and goals of the truck and the Jackal for one collision case."""
     tx0, tx1, _, ty1 = AGENT_TYPES["pallet_truck"].footprint_m
@@ -132,7 +133,12 @@ def resolve(key: str, section: dict) -> object:
         overlap_m=float(section.get("overlap_m", 0.1)),
     )
     guarded = str(section.get("guarded", "both"))
+    slowest = min(float(section["truck_speed_mps"]), float(section.get("jackal_speed_mps", 1.0)))
+    # long enough for the slower robot to drive on to its goal past the meeting point: a robot the
+    # safety layer stopped short of it may still be hit by an unguarded one, later
+    duration = float(section.get("time_s", 3.0)) + min(RUN_ON_M / slowest, 20.0) + 1.0
     values: dict[str, object] = {
+        "duration_s": round(duration, 3),
         "truck_pose": list(setup.truck_pose),
         "truck_goals": [list(setup.truck_goal)],
         "jackal_pose": list(setup.jackal_pose),
