@@ -100,15 +100,15 @@ def summarize(cases: pl.DataFrame) -> list[str]:
             avoided = int((joined["base"] & ~joined["collided"]).sum() or 0)
             line += f"; of the {would} cases that collide unguarded, {avoided} avoided"
         if g != "none" and n:
-            lat = sub["max_latency_s"].drop_nans().drop_nulls()
+            lat = sub["max_latency_s"].drop_nans().drop_nulls().to_list()
             line += (
                 f"; {int(sub['stops'].sum() or 0)} stops, {int(sub['slows'].sum() or 0)} slow-downs, "
                 f"{int(sub['false_stops'].sum() or 0)} false stops, "
-                f"max latency {lat.max() if len(lat) else float('nan'):.2f} s"
+                f"max latency {max(lat) if lat else float('nan'):.2f} s"
             )
-        ate = sub["ate_m"].drop_nans().drop_nulls()
-        if len(ate):
-            line += f"; localization ATE at most {ate.max() * 100:.1f} cm"
+        ate = sub["ate_m"].drop_nans().drop_nulls().to_list()
+        if ate:
+            line += f"; localization ATE at most {max(ate) * 100:.1f} cm"
         lines.append(line)
     return lines
 
