@@ -171,7 +171,7 @@ def test_tree_holds_for_hold_s_then_resumes_and_latches_collisions() -> None:
     assert "Contact?" in tree.ascii() and "ClearFor(1 s)?" in tree.ascii()
 
 
-def test_tree_slows_for_a_far_hazard_and_waits_before_a_stop_becomes_a_slow() -> None:
+def test_tree_slows_for_a_far_hazard_and_stays_stopped_while_any_hazard_remains() -> None:
     params = _params(hold_s=0.5)
     tree = RobotSafetyTree(RobotSpec("robot_agent_1", JACKAL, 1.0), params)
     moving = RobotEstimate((0.0, 0.0, 0.0), 1.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0))
@@ -181,8 +181,12 @@ def test_tree_slows_for_a_far_hazard_and_waits_before_a_stop_becomes_a_slow() ->
     assert clamp_command(d, 1.0, 0.5) == (0.4, pytest.approx(0.2))
     assert _tick(tree, 0.05, estimate=moving, others=[near]).state == STOP
     assert clamp_command(tree.ctx.decision, 1.0, 0.5) == (0.0, 0.0)
-    assert _tick(tree, 0.10, estimate=moving, others=[far]).state == STOP  # not yet 0.5 s clear of the stop
-    assert _tick(tree, 0.60, estimate=moving, others=[far]).state == SLOW
+    # the person stands 5 m ahead on its way: no crawling towards it, it stays stopped
+    for t in (0.10, 0.60, 2.0):
+        assert _tick(tree, t, others=[far], navigating=True).state == STOP
+    assert _tick(tree, 2.05, others=[], navigating=True).state == STOP  # clear, but not for 0.5 s yet
+    assert _tick(tree, 2.45, others=[], navigating=True).state == STOP
+    assert _tick(tree, 2.50, others=[], navigating=True).state == DRIVE  # 0.5 s after the last hazard
 
 
 def test_layer_events_are_deterministic_and_ttc_ignores_coordinated_robots() -> None:

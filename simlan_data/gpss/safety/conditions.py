@@ -139,7 +139,6 @@ class SafetyContext:
     decision: SafetyDecision = FREE
     latched: Finding | None = None
     last_hazard_ns: int | None = None
-    last_stop_hazard_ns: int | None = None
 
     @property
     def intended(self) -> bool:

@@ -95,14 +95,11 @@ class _Hold(py_trees.behaviour.Behaviour):
         t = ctx.stamp_ns
         ctx.last_hazard_ns = t
         if self.state == STOP:
-            ctx.last_stop_hazard_ns = t
             if ctx.latched is None and ctx.params.condition(finding.cause).resume == "never":
                 ctx.latched = finding
-        elif (
-            ctx.held.state == STOP
-            and ctx.last_stop_hazard_ns is not None
-            and (t - ctx.last_stop_hazard_ns) < ctx.params.hold_s * NS_PER_S
-        ):  # released from a stop to slow only once the stop's cause has been clear for hold_s
+        elif ctx.held.state == STOP:
+            # a stopped robot is not let off to crawl towards a hazard that is still there (it would
+            # creep on, stop, creep on...): it stays stopped until everything is clear for hold_s
             ctx.decision = ctx.held
             return Status.SUCCESS
         ctx.decision = SafetyDecision(
