@@ -230,16 +230,24 @@ def _own_motion(ctx: SafetyContext) -> tuple[NDArray[np.float64], NDArray[np.flo
 
 
 def worst_approach(ctx: SafetyContext, level: str) -> Finding | None:
-    """The other agent with the smallest TTC among those within SIMLAN's hazard rule."""
+    """The other agent with the smallest TTC among those within SIMLAN's hazard rule.
+
+    An agent behind a moving robot (relative to its direction of travel) is left to itself:
+    stopping cannot avoid being caught up with, it only makes it worse (SIMLAN's rule, on
+    relative velocity alone, stops the robot in front too).
+    """
     own = _own_motion(ctx)
     if own is None:
         return None
     centre, velocity = own
+    moving = float(np.hypot(velocity[0], velocity[1])) > 0.05
     p = ctx.params.ttc
     limit_s = p.stop_ttc_s if level == STOP else p.slow_ttc_s
     radius = circumradius(ctx.spec.footprint)
     best: Finding | None = None
     for other in ctx.others:
+        if moving and float((np.array([other.x_m, other.y_m]) - centre) @ velocity) < 0:
+            continue  # behind it
         contact_m = radius + other.radius_m
         a = approach(
             centre,
