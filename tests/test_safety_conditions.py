@@ -132,10 +132,13 @@ def test_ttc_condition_is_simlans_rule_hard_stop_near_slow_further_out() -> None
     assert worst_approach(ctx, SLOW) is None
     ctx.others = [other_at(-3.0, vx=-1.0)]  # behind and driving away
     assert worst_approach(ctx, SLOW) is None
-    ctx.others = [other_at(-2.5, vx=2.5)]  # catching up from behind: its own tree must stop it
+    ctx.others = [other_at(-2.5, vx=2.5)]  # catching up from behind: stopping would not help
     assert worst_approach(ctx, STOP) is None
+    ctx.others = [Mover("robot_agent_2", 2.5, -2.5, -0.7, 0.7, 0.47)]  # closing in from behind-right
+    assert worst_approach(ctx, STOP) is not None  # it drives into the other's path: stopping helps
     ctx.estimate = RobotEstimate((0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0))
-    assert worst_approach(ctx, STOP) is not None  # standing, it is told (stopping costs nothing)
+    ctx.others = [other_at(2.0, vx=-1.0)]
+    assert worst_approach(ctx, STOP) is None  # standing already: nothing to stop
     ctx.others = [other_at(20.0)]  # far: TTC beyond the slow horizon
     assert worst_approach(ctx, SLOW) is None
 

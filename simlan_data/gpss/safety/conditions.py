@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .geometry import (
+    Approach,
     Footprint,
     Pose2D,
     Zone,
@@ -232,32 +233,32 @@ def _own_motion(ctx: SafetyContext) -> tuple[NDArray[np.float64], NDArray[np.flo
 def worst_approach(ctx: SafetyContext, level: str) -> Finding | None:
     """The other agent with the smallest TTC among those within SIMLAN's hazard rule.
 
-    An agent behind a moving robot (relative to its direction of travel) is left to itself:
-    stopping cannot avoid being caught up with, it only makes it worse (SIMLAN's rule, on
-    relative velocity alone, stops the robot in front too).
+    Only hazards that stopping helps with count: if the robot standing still would meet the
+    other as soon or sooner (being caught up from behind, or already standing), the hazard is
+    the other's to avoid (SIMLAN's rule, on relative velocity alone, stops the robot in front of
+    a faster one too, which only brings the collision forward).
     """
     own = _own_motion(ctx)
     if own is None:
         return None
     centre, velocity = own
-    moving = float(np.hypot(velocity[0], velocity[1])) > 0.05
     p = ctx.params.ttc
     limit_s = p.stop_ttc_s if level == STOP else p.slow_ttc_s
     radius = circumradius(ctx.spec.footprint)
     best: Finding | None = None
+
+    def hazard(a: Approach, contact_m: float) -> bool:
+        return a.t_cpa_s >= 0 and a.cpa_m <= max(p.stop_cpa_m, contact_m) and a.ttc_s <= limit_s
+
     for other in ctx.others:
-        if moving and float((np.array([other.x_m, other.y_m]) - centre) @ velocity) < 0:
-            continue  # behind it
         contact_m = radius + other.radius_m
-        a = approach(
-            centre,
-            velocity,
-            np.array([other.x_m, other.y_m]),
-            np.array([other.vx_mps, other.vy_mps]),
-            contact_m,
-        )
-        if a.t_cpa_s < 0 or a.cpa_m > max(p.stop_cpa_m, contact_m) or a.ttc_s > limit_s:
+        where, v_other = np.array([other.x_m, other.y_m]), np.array([other.vx_mps, other.vy_mps])
+        a = approach(centre, velocity, where, v_other, contact_m)
+        if not hazard(a, contact_m):
             continue
+        standing = approach(centre, np.zeros(2), where, v_other, contact_m)
+        if hazard(standing, contact_m) and standing.ttc_s <= a.ttc_s:
+            continue  # stopping would not help: the other must avoid it
         if best is None or a.ttc_s < best.ttc_s:
             best = Finding(
                 "ttc",
