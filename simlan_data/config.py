@@ -14,11 +14,14 @@ from typing import Any, Optional
 
 import numpy as np
 from hydra.core.config_store import ConfigStore
-from omegaconf import MISSING
+from omegaconf import MISSING, DictConfig, OmegaConf
 
+from .config_safety import CollisionScenarioConfig, SafetyConfig
 from .errors import ConfigError
 from .gpss.birdseye import CanvasSpec
+from .gpss.safety import SafetyParams
 from .posemap_config import PosemapConfig
+from .scenarios import collision as collision_scenario
 
 NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
 STREAMS = ("rgb", "depth", "semantic")
@@ -519,6 +522,8 @@ class Config:
     posemap: PosemapConfig = field(default_factory=PosemapConfig)
     perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
     faults: FaultsConfig = field(default_factory=FaultsConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
@@ -579,6 +584,7 @@ class Config:
                     f"use one of {', '.join(map(str, self.cameras.ids))}",
                 )
         self._jitter_spawn_poses()
+        self.safety_params()  # namespaces named in the safety section must be agents of the run
 
     def _jitter_spawn_poses(self) -> None:
         """Move every agent's spawn pose by its seeded offset (see PerturbationConfig)."""
@@ -592,13 +598,32 @@ class Config:
             x, y, yaw = (float(v) for v in agent.pose)
             agent.pose = [x + float(dx), y + float(dy), yaw + float(dyaw)]
 
+    def safety_params(self) -> SafetyParams:
+        """The safety trees' parameters for this run (rates from the run's clocks)."""
+        return self.safety.params(
+            control_rate_hz=self.control_rate_hz,
+            camera_rate_hz=self.cameras.rate_hz,
+            processing_delay_s=self.localization.processing_delay_s,
+            coordinated=self.navigation.coordination,
+            known_namespaces=list(self.agents),
+        )
+
     @property
     def agent_list(self) -> list[AgentConfig]:
         """Agents in namespace order."""
         return list(self.agents.values())
 
 
+def _collision_setup(key: str, *, _root_: DictConfig) -> Any:
+    """``${collision_setup:KEY}``: agent poses and goals of scenario=collision from its ``collision`` section."""
+    section = OmegaConf.to_container(_root_.collision, resolve=True)
+    assert isinstance(section, dict)
+    return collision_scenario.resolve(key, section)
+
+
 def register_configs() -> None:
     """Register the schema with Hydra's ConfigStore (conf/config.yaml lists it first)."""
     cs = ConfigStore.instance()
     cs.store(name="simlan_schema", node=Config)
+    if not OmegaConf.has_resolver("collision_setup"):
+        OmegaConf.register_new_resolver("collision_setup", _collision_setup)

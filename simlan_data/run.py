@@ -29,9 +29,11 @@ from .cli import run_cli
 from .config import Config, register_configs
 from .constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from .errors import ConfigError, RunError, SimlanError
+from .evaluation import safety_sweep  # noqa: F401 - registers the collision sweep report
 from .evaluation.localization_replay import recording_metrics
 from .evaluation.replay import ReplayContext
 from .evaluation.report import write_report
+from .evaluation.safety_metrics import recording_safety_metrics
 from .recording.reader import RecordingReader
 from .run_marker import RunMarker, write_running
 from .sim.scene import load_inputs
@@ -128,6 +130,7 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
         with RecordingReader(bag) as reader:
             ctx = ReplayContext(reader, run_dir)
             metrics.update(recording_metrics(reader, ctx.config, ctx.cameras))
+            metrics.update(recording_safety_metrics(reader, ctx.config, ctx.cameras))
             (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
             write_report(run_dir, cfg, stats, metrics, reader)
     else:

@@ -19,6 +19,7 @@ from ..geometry.rotations import wrap_angle
 from .coordinator import footprint_polygon
 from .localization import LocalizerParams
 from .occupancy import OccupancyGrid
+from .safety import SafetyEvent, SafetyParams
 from .stack import AgentPlan, GpssStack, NavigationParams
 
 
@@ -32,6 +33,7 @@ class DryRunResult:
     min_gap_pair: tuple[str, str] | None
     waits_s: dict[str, float]
     trajectories: dict[str, np.ndarray] = field(default_factory=dict)  # (N, 4): t, x, y, yaw
+    safety_events: list[SafetyEvent] = field(default_factory=list)
 
     @property
     def all_goals_reached(self) -> bool:
@@ -46,9 +48,11 @@ def dry_run(
     duration_s: float,
     control_hz: float = 20.0,
     accel_mps2: float = 1.0,
+    safety: SafetyParams | None = None,
 ) -> DryRunResult:
-    """Drive ``agents`` (diff-drive robots and walkers) for ``duration_s`` with the GPSS stack."""
-    stack = GpssStack(agents, {}, grid, nav=nav, loc=LocalizerParams(), source="ground_truth")
+    """Drive ``agents`` (diff-drive robots and walkers) for ``duration_s`` with the GPSS stack
+    (and its safety layer, on ground truth, if ``safety`` is given)."""
+    stack = GpssStack(agents, {}, grid, nav=nav, loc=LocalizerParams(), source="ground_truth", safety=safety)
     dt = 1.0 / control_hz
     poses = {a.namespace: np.array(a.pose, dtype=float) for a in agents}
     speeds = {a.namespace: 0.0 for a in agents}
@@ -93,4 +97,5 @@ def dry_run(
         min_pair,
         {ns: stack.coordinator.waits.get(ns, 0) * dt for ns in stack.navigators},
         {ns: np.array(v) for ns, v in traj.items()},
+        list(stack.safety.events),
     )

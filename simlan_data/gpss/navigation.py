@@ -24,7 +24,7 @@ class NavigationStatus:
     goals_total: int
     goals_reached: int = 0
     goals_failed: int = 0
-    state: str = "idle"  # idle | waiting_localization | waiting | following | done
+    state: str = "idle"  # idle | waiting_localization | waiting | following | safety_stop | done
     planned_length_m: float = 0.0  # sum of the first plan's length of every goal
     plans: int = 0
     failures: list[str] = field(default_factory=list)
@@ -104,6 +104,12 @@ class Navigator:
             self.status.planned_length_m += plan.length_m
             self._goal_first_plan = False
         self.new_plan = True
+
+    def cancel(self) -> None:
+        """Drop the current plan: the safety layer stopped the robot. The goal stays; a new plan
+        is made from wherever the robot stands once it may drive again."""
+        self.follower, self.plan = None, None
+        self.status.state = "safety_stop"
 
     def _advance(self) -> None:
         self.index += 1

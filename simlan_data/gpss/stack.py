@@ -3,10 +3,14 @@
 Data flow::
 
     camera tick:  JPEG per camera --> Localizer (detect, fuse) --> fixes
-    control tick: Localizer.estimate --> poses --> Coordinator (who waits) --> Navigator per robot
-                  --> (v, w) per robot;  people (walkers) walk their waypoints on their own
+                  segmentation per camera --> PersonDetector --> fused people --> PersonTracker
+    control tick: Localizer.estimate --> poses --> Coordinator (who waits) --+
+                  estimates, contacts, tracked people, plans --> SafetyLayer --+--> Navigator per
+                  robot (speed limits of both) --> (v, w) after the safety layer, per robot;
+                  people (walkers) walk their waypoints on their own
 
-Robots never see ground truth unless ``localization.source=ground_truth`` is asked for.
+Robots never see ground truth unless ``localization.source=ground_truth`` is asked for: other
+robots come from the localizer, people from the cameras' person detector.
 """
 
 from __future__ import annotations
@@ -27,7 +31,23 @@ from .localization import Localizer, LocalizerParams, PoseEstimate
 from .markers import MarkerMount
 from .navigation import Navigator
 from .occupancy import OccupancyGrid
+from .people import PeopleParams, PersonDetection, PersonDetector, PersonTracker, fuse_people
 from .planner import GridPlanner
+from .safety import (
+    FREE,
+    STOP,
+    RobotEstimate,
+    RobotSpec,
+    SafetyDecision,
+    SafetyLayer,
+    SafetyParams,
+    SafetyWorld,
+    clamp_command,
+    mover_of,
+)
+
+DRIVE_KINDS = {"diff": "robot", "walker": "person", "static": "static"}
+PERSON_FOOTPRINT = (-0.2, 0.2, -0.3, 0.3)  # the humanoid's footprint, for the coordinator
 
 
 @dataclass(frozen=True)
@@ -59,6 +79,7 @@ class ControlOutput:
     commands: dict[str, tuple[float, float]] = field(default_factory=dict)
     estimates: dict[str, PoseEstimate] = field(default_factory=dict)
     decisions: dict[str, Decision] = field(default_factory=dict)
+    safety: dict[str, SafetyDecision] = field(default_factory=dict)
 
 
 class GpssStack:
@@ -73,6 +94,8 @@ class GpssStack:
         nav: NavigationParams,
         loc: LocalizerParams,
         source: str = "camera",
+        safety: SafetyParams | None = None,
+        people: PeopleParams | None = None,
     ) -> None:
         self.agents = {a.namespace: a for a in agents}
         self.grid, self.nav, self.source = grid, nav, source
@@ -112,6 +135,34 @@ class GpssStack:
                     FollowerParams(speed_mps=a.speed_mps, max_yaw_rate_rps=2.5, turn_in_place_rad=1.2),
                     loop=a.loop,
                 )
+        specs = {
+            a.namespace: RobotSpec(
+                a.namespace,
+                a.kind.footprint_m,
+                min(a.speed_mps, a.kind.max_speed_mps),
+                DRIVE_KINDS.get(a.kind.drive, "static"),
+            )
+            for a in agents
+        }
+        static = [
+            m
+            for a in agents
+            if a.kind.drive == "static"
+            and (m := mover_of(specs[a.namespace], RobotEstimate(a.pose))) is not None
+        ]
+        self.safety = SafetyLayer(list(specs.values()), safety or SafetyParams(enabled=False), static=static)
+        self._cancelled: set[str] = set()
+        self._speeds: dict[str, tuple[float, float]] = {}  # last command per robot (ground-truth source)
+        # people carry no marker: GPSS finds them in the segmentation images (where there are any)
+        self.people_params = people or PeopleParams(enabled=False)
+        self.person_detector = (
+            PersonDetector(cameras, self.people_params)
+            if self.people_params.enabled and source == "camera" and self.walkers
+            else None
+        )
+        self.person_tracker = PersonTracker(self.people_params)
+        self._people_frame: list[PersonDetection] = []
+        self.last_people: list[tuple[float, float]] | None = None  # fused at the last camera tick
 
     # ------------------------------------------------------------------------------- cameras
     def camera_frame(
@@ -139,13 +190,52 @@ class GpssStack:
         self.localizer.observe(t_ns, camera_id, plan, detections, seconds)
         return "full" if plan == "full" else "roi"
 
+    def people_frame(self, camera_id: str, labels: NDArray[np.uint8] | None) -> None:
+        """Let the person detector look at one camera's segmentation image."""
+        if self.person_detector is not None and labels is not None:
+            self._people_frame.extend(self.person_detector.detect(camera_id, labels))
+
     def close_camera_tick(self, t_ns: int) -> None:
         if self.source == "camera":
             self.localizer.close_frame(t_ns)
+        if self.person_detector is not None:
+            self.last_people = fuse_people(self._people_frame, self.people_params.cluster_m)
+            self._people_frame = []
+            self.person_tracker.update(t_ns, self.last_people)
+
+    def robot_estimates(
+        self, estimates: dict[str, PoseEstimate], truth: dict[str, tuple[float, float, float]]
+    ) -> dict[str, RobotEstimate]:
+        """What GPSS knows of every robot, as the safety layer reads it."""
+        out = {}
+        for ns in self.navigators:
+            if self.source != "camera":
+                v, w = self._speeds.get(ns, (0.0, 0.0))
+                out[ns] = RobotEstimate(truth[ns], v, w, 0.0, 0.0, truth[ns])
+                continue
+            e = estimates.get(ns)
+            if e is None:
+                out[ns] = RobotEstimate(None, last_pose=self.last_known[ns])
+                continue
+            if not e.valid:  # withheld: only its age is known (what /<ns>/localization_status says)
+                out[ns] = RobotEstimate(None, fix_age_s=e.age_s, last_pose=self.last_known[ns])
+                continue
+            sigma = float(np.sqrt(max(e.covariance[0, 0], e.covariance[1, 1])))
+            pose = (e.x_m, e.y_m, e.yaw_rad)
+            out[ns] = RobotEstimate(pose, e.speed_mps, e.yaw_rate_rps, sigma, e.age_s, self.last_known[ns])
+        return out
 
     # ------------------------------------------------------------------------------- control
-    def control(self, t_ns: int, dt_s: float, truth: dict[str, tuple[float, float, float]]) -> ControlOutput:
-        """Commands for every agent. ``truth`` is used only for people and ``source=ground_truth``."""
+    def control(
+        self,
+        t_ns: int,
+        dt_s: float,
+        truth: dict[str, tuple[float, float, float]],
+        contacts: dict[str, tuple[float, tuple[str, ...]]] | None = None,
+    ) -> ControlOutput:
+        """Commands for every agent, after the safety layer. ``truth`` moves the people (walkers)
+        and steers robots only with ``source=ground_truth``; ``contacts`` are the robots' collision
+        sensor readings (max force, bodies touched)."""
         out = ControlOutput()
         if self.source == "camera":
             out.estimates = self.localizer.estimate(t_ns)
@@ -168,19 +258,67 @@ class GpssStack:
                 )
             if intent is not None:
                 intents.append(intent)
-        for ns in self.walkers:
-            intents.append(Intent(ns, 10**6, truth[ns], self.agents[ns].kind.footprint_m, None, yields=False))
+        people = self.person_tracker.people(t_ns) if self.person_detector is not None else []
+        if self.source != "camera":  # steering on ground truth: people too
+            for ns in self.walkers:
+                intents.append(
+                    Intent(ns, 10**6, truth[ns], self.agents[ns].kind.footprint_m, None, yields=False)
+                )
+                v, w = self._speeds.get(ns, (0.0, 0.0))
+                est = RobotEstimate(truth[ns], v, w, 0.0, 0.0, truth[ns])
+                if (m := mover_of(self.safety.specs[ns], est)) is not None:
+                    people.append(m)
+        for person in people:  # where the cameras see people (never their ground truth)
+            heading = float(np.arctan2(person.vy_mps, person.vx_mps))
+            intents.append(
+                Intent(
+                    person.name,
+                    10**6,
+                    (person.x_m, person.y_m, heading),
+                    PERSON_FOOTPRINT,
+                    None,
+                    yields=False,
+                )
+            )
         if self.nav.coordination:
             out.decisions = self.coordinator.decide(t_ns, intents)
+        if self.safety.trees:
+            world = SafetyWorld(
+                t_ns,
+                self.robot_estimates(out.estimates, truth),
+                dict(contacts or {}),
+                people,
+                {
+                    ns: (nav.plan.points_xy if nav.plan is not None else None)
+                    for ns, nav in self.navigators.items()
+                },
+                {ns: nav.goal is not None for ns, nav in self.navigators.items()},
+            )
+            out.safety = self.safety.step(world)
         for ns, nav in self.navigators.items():
+            guard = out.safety.get(ns, FREE)
+            if guard.state == STOP:  # zero command, navigation cancelled (replanned on resume)
+                if ns not in self._cancelled:
+                    nav.cancel()
+                    self._cancelled.add(ns)
+                out.commands[ns] = (0.0, 0.0)
+                continue
+            self._cancelled.discard(ns)
             decision = out.decisions.get(ns)
             if decision is not None and decision.replan and ns in poses:
                 self._detour(ns, poses[ns], [i for i in intents if i.namespace != ns])
-            out.commands[ns] = nav.step(poses.get(ns), dt_s, decision)
+            if guard.speed_limit_mps is not None:
+                limits = [guard.speed_limit_mps] + (
+                    [] if decision is None or decision.speed_limit_mps is None else [decision.speed_limit_mps]
+                )
+                decision = Decision(min(limits), decision.blocked_by if decision else (), False)
+            v, w = nav.step(poses.get(ns), dt_s, decision)
+            out.commands[ns] = clamp_command(guard, v, w)
         for ns, walker in self.walkers.items():
             x, y, yaw = truth[ns]
             cmd = walker.step(x, y, yaw, dt_s)
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
+        self._speeds = dict(out.commands)
         return out
 
     def _detour(self, ns: str, pose: tuple[float, float, float], others: list[Intent]) -> bool:

@@ -43,6 +43,15 @@ NavigationStatusMsg = T[schema.NAVIGATION_STATUS_TYPE]
 LocalizationStatusMsg = T[schema.LOCALIZATION_STATUS_TYPE]
 PoseWithCovariance = T["geometry_msgs/msg/PoseWithCovariance"]
 PoseWithCovarianceStamped = T[schema.POSE_COV_TYPE]
+PoseArray = T[schema.POSE_ARRAY_TYPE]
+MarkerArray = T[schema.MARKER_ARRAY_TYPE]
+Marker = T["visualization_msgs/msg/Marker"]
+ColorRGBA = T["std_msgs/msg/ColorRGBA"]
+Duration = T["builtin_interfaces/msg/Duration"]
+MeshFile = T["visualization_msgs/msg/MeshFile"]
+SafetyEventMsg = T[schema.SAFETY_EVENT_TYPE]
+SafetyStateMsg = T[schema.SAFETY_STATE_TYPE]
+MARKER_ADD, MARKER_LINE_STRIP, MARKER_TEXT = 0, 4, 9  # visualization_msgs/Marker constants
 
 
 def time_msg(stamp_ns: int) -> Any:
@@ -317,3 +326,114 @@ def localization_status(
         fix_age_s=float(fix_age_s),
         cameras=list(cameras),
     )
+
+
+def _planar_pose(x: float, y: float, yaw: float) -> Any:
+    return pose_msg(x, y, 0.0, (0.0, 0.0, float(np.sin(yaw / 2)), float(np.cos(yaw / 2))))
+
+
+def safety_event(
+    stamp_ns: int,
+    *,
+    namespace: str,
+    cause: str,
+    action: str,
+    pose: Sequence[float] | None,
+    pose_valid: bool,
+    speed_mps: float,
+    other: str,
+    detail: str,
+) -> Any:
+    x, y, yaw = (float(v) for v in pose) if pose is not None else (0.0, 0.0, 0.0)
+    return SafetyEventMsg(
+        header=header(stamp_ns, schema.MAP_FRAME),
+        namespace=namespace,
+        cause=cause,
+        action=action,
+        pose=_planar_pose(x, y, yaw),
+        pose_valid=bool(pose_valid),
+        speed_mps=float(speed_mps),
+        other=other,
+        detail=detail,
+    )
+
+
+def safety_state(
+    stamp_ns: int,
+    *,
+    state: str,
+    cause: str,
+    speed_limit_mps: float | None,
+    min_ttc_s: float,
+    cpa_m: float,
+    nearest_m: float,
+    nearest: str,
+    zone_clearance_m: float,
+) -> Any:
+    return SafetyStateMsg(
+        header=header(stamp_ns, schema.MAP_FRAME),
+        state=state,
+        cause=cause,
+        speed_limit_mps=-1.0 if speed_limit_mps is None else float(speed_limit_mps),
+        min_ttc_s=float(min_ttc_s),
+        cpa_m=float(cpa_m),
+        nearest_m=float(nearest_m),
+        nearest=nearest,
+        zone_clearance_m=float(zone_clearance_m),
+    )
+
+
+def pose_array(stamp_ns: int, frame_id: str, points_xy: Sequence[Sequence[float]]) -> Any:
+    """geometry_msgs/PoseArray of floor positions (z = 0, no rotation)."""
+    return PoseArray(
+        header=header(stamp_ns, frame_id),
+        poses=[pose_msg(float(x), float(y), 0.0, (0.0, 0.0, 0.0, 1.0)) for x, y in points_xy],
+    )
+
+
+def _marker(stamp_ns: int, ns: str, marker_id: int, kind: int, **fields: Any) -> Any:
+    base: dict[str, Any] = {
+        "header": header(stamp_ns, schema.MAP_FRAME),
+        "ns": ns,
+        "id": marker_id,
+        "type": kind,
+        "action": MARKER_ADD,
+        "pose": pose_msg(0.0, 0.0, 0.0, (0.0, 0.0, 0.0, 1.0)),
+        "scale": Vector3(x=0.08, y=0.08, z=0.08),
+        "color": ColorRGBA(r=1.0, g=0.2, b=0.1, a=1.0),
+        "lifetime": Duration(sec=0, nanosec=0),
+        "frame_locked": False,
+        "points": [],
+        "colors": [],
+        "texture_resource": "",
+        "texture": CompressedImage(header=header(0, ""), format="", data=np.zeros(0, dtype=np.uint8)),
+        "uv_coordinates": [],
+        "text": "",
+        "mesh_resource": "",
+        "mesh_file": MeshFile(filename="", data=np.zeros(0, dtype=np.uint8)),
+        "mesh_use_embedded_materials": False,
+    }
+    base.update(fields)
+    return Marker(**base)
+
+
+def zone_markers(stamp_ns: int, zones: Sequence[tuple[str, Sequence[Sequence[float]]]]) -> Any:
+    """visualization_msgs/MarkerArray: each zone as a closed line strip plus its name."""
+    markers = []
+    for i, (name, corners) in enumerate(zones):
+        ring = [Point(x=float(x), y=float(y), z=0.02) for x, y in [*corners, corners[0]]]
+        markers.append(_marker(stamp_ns, "safety_zones", 2 * i, MARKER_LINE_STRIP, points=ring))
+        cx = float(np.mean([c[0] for c in corners]))
+        cy = float(np.mean([c[1] for c in corners]))
+        markers.append(
+            _marker(
+                stamp_ns,
+                "safety_zone_names",
+                2 * i + 1,
+                MARKER_TEXT,
+                pose=pose_msg(cx, cy, 0.5, (0.0, 0.0, 0.0, 1.0)),
+                scale=Vector3(x=0.0, y=0.0, z=0.5),
+                text=name,
+            )
+        )
+    return MarkerArray(markers=markers)

@@ -41,6 +41,10 @@ POSE_COV_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_STAMPED_TYPE = "geometry_msgs/msg/PoseStamped"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 POSE_LANDMARKS_TYPE = "simlan_msgs/msg/PoseLandmarks"
+POSE_ARRAY_TYPE = "geometry_msgs/msg/PoseArray"
+MARKER_ARRAY_TYPE = "visualization_msgs/msg/MarkerArray"
+SAFETY_EVENT_TYPE = "simlan_msgs/msg/SafetyEvent"
+SAFETY_STATE_TYPE = "simlan_msgs/msg/SafetyState"
 
 # ------------------------------------------------------------------------------------- topics
 CLOCK = "/clock"
@@ -51,6 +55,9 @@ CONFIG = "/simlan/config"
 RUN_INFO = "/simlan/run_info"
 SEMANTIC_LABELS = "/simlan/semantic_labels"
 BIRDSEYE_IMAGE = "/birdseye/image"
+SAFETY_EVENTS = "/safety/events"
+SAFETY_ZONES = "/safety/zones"
+PEOPLE_DETECTIONS = "/people/detections"
 
 
 @dataclass(frozen=True)
@@ -172,6 +179,16 @@ def agent_topics(namespace: str) -> dict[str, Topic]:
             LOCALIZATION_STATUS_TYPE,
             "observed/valid flags and age of the newest camera fix, control rate",
         ),
+        "velocity_estimate": Topic(
+            f"/{namespace}/velocity_estimate",
+            TWIST_STAMPED_TYPE,
+            "estimated forward speed and yaw rate (base_link), control rate, while the pose estimate is valid",
+        ),
+        "safety_state": Topic(
+            f"/{namespace}/safety_state",
+            SAFETY_STATE_TYPE,
+            "the robot's safety tree after every tick: state, cause, TTC, zone clearance (robots with a tree)",
+        ),
     }
 
 
@@ -187,6 +204,21 @@ GLOBAL_TOPICS: tuple[Topic, ...] = (
         BIRDSEYE_IMAGE,
         COMPRESSED_IMAGE_TYPE,
         "stitched bird's-eye view, rgb8 JPEG, frame map, canvas as in the config's birdseye section (at birdseye.rate_hz, if > 0)",
+    ),
+    Topic(
+        SAFETY_EVENTS,
+        SAFETY_EVENT_TYPE,
+        "safety events: robot, cause, action (stop/slow/resume), estimated pose",
+    ),
+    Topic(
+        SAFETY_ZONES,
+        MARKER_ARRAY_TYPE,
+        "restricted areas as closed line strips with their names, frame map (once)",
+    ),
+    Topic(
+        PEOPLE_DETECTIONS,
+        POSE_ARRAY_TYPE,
+        "people found in the cameras' segmentation images, fused, frame map, image stamp (camera rate, runs with people)",
     ),
 )
 

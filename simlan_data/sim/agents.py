@@ -81,6 +81,7 @@ class Agent:
             self.joints[info[1].decode()] = j
             self.links[info[12].decode()] = j
         info = pb.getDynamicsInfo(body, -1, physicsClientId=client)
+        self._com_in_link = (info[3], info[4])
         self._link_in_com = pb.invertTransform(info[3], info[4])
         self.command = (0.0, 0.0)
 
@@ -219,9 +220,11 @@ class WalkerAgent(Agent):
         self._yaw += w * dt_s
         self._x += v * np.cos(self._yaw) * dt_s
         self._y += v * np.sin(self._yaw) * dt_s
-        pb.resetBasePositionAndOrientation(
-            self.body, [self._x, self._y, 0.0], list(quat_from_yaw(self._yaw)), physicsClientId=self.client
+        # PyBullet places a base by its centre of mass (0.95 m up in the walker): from base_link
+        pos, orn = pb.multiplyTransforms(
+            [self._x, self._y, 0.0], list(quat_from_yaw(self._yaw)), *self._com_in_link
         )
+        pb.resetBasePositionAndOrientation(self.body, pos, orn, physicsClientId=self.client)
 
     def twist(self) -> tuple[float, float]:
         return self.command

@@ -13,6 +13,7 @@ from ..geometry.transforms import Transform
 from ..gpss.localization import PoseEstimate
 from ..gpss.markers import Detection
 from ..gpss.navigation import Navigator
+from ..gpss.safety import SafetyEvent, SafetyLayer, Zone
 from ..recording import messages as M
 from ..recording import schema
 from ..recording.writer import RecordingWriter
@@ -152,6 +153,11 @@ class Publisher:
                 t,
                 M.pose_with_covariance(t, schema.MAP_FRAME, e.x_m, e.y_m, e.yaw_rad, e.covariance),
             )
+            self.writer.write(
+                self.topics[ns]["velocity_estimate"],
+                t,
+                M.twist_stamped(t, schema.base_link_frame(ns), e.speed_mps, e.yaw_rate_rps),
+            )
             odom_from_base = self.odom[ns].inverse() @ Transform.from_pose2d(e.x_m, e.y_m, e.yaw_rad)
             tfs.append(
                 M.transform_stamped(t, schema.odom_frame(ns), schema.base_link_frame(ns), odom_from_base)
@@ -188,3 +194,53 @@ class Publisher:
                     blocked_by=blocked_by,
                 ),
             )
+
+    # ------------------------------------------------------------------------------ safety
+    def safety_zones(self, zones: tuple[Zone, ...]) -> None:
+        """The restricted areas, once at the start (they do not change during a run)."""
+        self.writer.write(
+            global_topic(schema.SAFETY_ZONES), 0, M.zone_markers(0, [(z.name, z.points) for z in zones])
+        )
+
+    def safety(self, t: int, layer: SafetyLayer, events: list[SafetyEvent]) -> None:
+        """New safety events, and every guarded robot's tree state."""
+        for ev in events:
+            self.writer.write(global_topic(schema.SAFETY_EVENTS), t, safety_event_msg(ev))
+        for ns, decision in layer.decisions.items():
+            mon = layer.monitors.get(ns)
+            if mon is None:
+                continue
+            self.writer.write(
+                self.topics[ns]["safety_state"],
+                t,
+                M.safety_state(
+                    t,
+                    state=decision.state,
+                    cause=decision.cause,
+                    speed_limit_mps=decision.speed_limit_mps,
+                    min_ttc_s=mon.min_ttc_s,
+                    cpa_m=mon.cpa_m,
+                    nearest_m=mon.nearest_m,
+                    nearest=mon.nearest,
+                    zone_clearance_m=mon.zone_clearance_m,
+                ),
+            )
+
+    def people(self, t: int, positions: list[tuple[float, float]]) -> None:
+        self.writer.write(
+            global_topic(schema.PEOPLE_DETECTIONS), t, M.pose_array(t, schema.MAP_FRAME, positions)
+        )
+
+
+def safety_event_msg(ev: SafetyEvent) -> Any:
+    return M.safety_event(
+        ev.stamp_ns,
+        namespace=ev.namespace,
+        cause=ev.cause,
+        action=ev.action,
+        pose=ev.pose,
+        pose_valid=ev.pose is not None and ev.pose_valid,
+        speed_mps=ev.speed_mps,
+        other=ev.other,
+        detail=ev.detail,
+    )

@@ -8,9 +8,11 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
       camera tick    layered render per camera -> encode (workers) -> bag
                      JPEG -> decode, marker search (workers, while the next cameras render)
                           -> localizer (in camera order: poses, fuse) -> /camera_<id>/marker_detections
+                     segmentation -> person detector -> /people/detections
                      (posemap.landmarks_rate_hz) projection estimator -> /camera_<id>/pose_landmarks
-      control tick   estimates -> coordinator -> navigators -> cmd_vel -> wheel motors;
-                     collision sensing; /tf, /<ns>/pose_estimate, plan, goal, status
+      control tick   collision sensing; estimates -> coordinator + safety trees -> navigators
+                     -> cmd_vel (after the safety layer) -> wheel motors; /tf, /<ns>/pose_estimate,
+                     plan, goal, status, /safety/events, /<ns>/safety_state
                      (every n-th: all frames -> bird's-eye stitcher -> JPEG -> /birdseye/image)
       physics step
 """
@@ -35,6 +37,7 @@ from ..evaluation.faults import CameraFaults
 from ..evaluation.replay import camera_from_messages
 from ..geometry.camera import CameraModel
 from ..gpss.localization import LocalizerParams
+from ..gpss.people import PeopleParams
 from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
 from ..recording import messages as M
 from ..recording.writer import NullWriter, RecordingWriter
@@ -206,6 +209,8 @@ class Simulation:
                 bias_m=tuple(loc.bias_m),
             ),
             source=loc.source,
+            safety=cfg.safety_params(),
+            people=PeopleParams.from_dict(asdict(cfg.safety.people)),
         )
 
     def _search(
@@ -246,6 +251,7 @@ class Simulation:
         pub = Publisher(writer, cfg, scene.agents)
         pub.static(config_yaml=self.config_yaml, renderer=scene.client.backend, cameras=scene.cameras)
         stack = self._stack(scene)
+        pub.safety_zones(stack.safety.params.zones)
         recorder = CameraRecorder(
             writer,
             cfg.recording,
@@ -294,13 +300,15 @@ class Simulation:
                     driver.camera_tick(t, step // self.camera_every, [(f[0], f[1]) for f in frames])
                 loc0 = time.perf_counter()
                 stats.render_wall_s += loc0 - render0
-                for camera, _, plan, search in frames:
-                    if plan is None or search is None:
-                        continue
-                    detections, seconds = search.result()
-                    mode = stack.camera_detections(t, camera.camera_id, plan, detections, seconds)
-                    pub.detections(t, camera, detections, mode)
+                for camera, images, plan, search in frames:
+                    if plan is not None and search is not None:
+                        detections, seconds = search.result()
+                        mode = stack.camera_detections(t, camera.camera_id, plan, detections, seconds)
+                        pub.detections(t, camera, detections, mode)
+                    stack.people_frame(camera.camera_id, images.labels)
                 stack.close_camera_tick(t)
+                if stack.last_people is not None:
+                    pub.people(t, stack.last_people)
                 stats.localize_wall_s += time.perf_counter() - loc0
                 if progress is not None:
                     progress(t / NS_PER_S)
@@ -316,14 +324,19 @@ class Simulation:
                     xy = pose.translation[:2]
                     stats.distance_m[agent.namespace] += float(np.linalg.norm(xy - last_xy[agent.namespace]))
                     last_xy[agent.namespace] = xy.copy()
-                out = stack.control(t, dt_control, truth)
+                # sensed before the control step: the safety trees read this tick's contacts
+                hits = {agent.namespace: agent.collisions(ignore, scene.names) for agent in scene.agents}
+                contacts = {ns: (hit.max_force_n, tuple(hit.others)) for ns, hit in hits.items()}
+                n_events = len(stack.safety.events)
+                out = stack.control(t, dt_control, truth, contacts)
                 if stack.source == "camera":
                     pub.estimates(t, out.estimates, stack.localizer.namespaces)
+                pub.safety(t, stack.safety, stack.safety.events[n_events:])
                 for agent in scene.agents:
                     ns = agent.namespace
                     v, w = agent.apply_command(*out.commands.get(ns, (0.0, 0.0)))
                     stack.localizer.command(t, ns, v, w)
-                    hit = agent.collisions(ignore, scene.names)
+                    hit = hits[ns]
                     if hit.in_collision and not in_contact[ns]:
                         stats.collisions[ns] += 1
                     in_contact[ns] = hit.in_collision

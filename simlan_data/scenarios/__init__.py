@@ -1,0 +1,1 @@
+"""Scenario generators: config values computed from a scenario's parameters (pure, no simulator)."""
