@@ -69,7 +69,7 @@ def test_golden_replay_matches_expected_metrics(tmp_path: Path) -> None:
         "golden_single_truck_birdseye.png",
     } <= plots
     metrics = pl.read_parquet(out / "metrics.parquet")
-    assert set(metrics["source"]) == {"run", "localization", "birdseye"}
+    assert set(metrics["source"]) == {"run", "localization", "birdseye", "safety"}
     assert (out / "metrics.csv").is_file() and (out / "summary.csv").is_file()
 
 

@@ -48,7 +48,7 @@ from ..gpss.safety.conditions import SafetyContext, contact, enters_zone, unobse
 from ..gpss.safety.geometry import footprint_polygon
 from ..recording.reader import RecordingReader
 from .metrics import Visibility
-from .safety_inputs import SafetyRecording, read_safety_recording, safety_params, truth_movers
+from .safety_inputs import SafetyRecording, agent_specs, read_safety_recording, safety_params, truth_movers
 
 MOVING_MPS = 0.05
 STANDSTILL_MPS = 0.02
@@ -305,7 +305,10 @@ def evaluate(
 def recording_safety_metrics(
     reader: RecordingReader, config: dict[str, Any], cameras: dict[str, CameraModel]
 ) -> dict[str, float]:
-    """``safety.*`` of a live run, from its recording (recorded events and states)."""
+    """``safety.*`` of a live run, from its recording (recorded events and states); none without robots."""
+    specs, _ = agent_specs(config)
+    if not any(s.kind == "robot" for s in specs.values()):
+        return {}
     rec = read_safety_recording(reader, config)
     params = safety_params(config)
     metrics, _, _ = evaluate(rec, params, rec.events, rec.states, cameras)
