@@ -220,7 +220,7 @@ class Localizer:
             )
             for m in self.mounts
         }
-        self._detector = MarkerDetector()
+        self._detector = MarkerDetector(marker_ids=sorted(self._by_marker))
         self._local = threading.local()  # a detector per worker thread (see detect)
         self._prediction_cache: dict[tuple[str, int], tuple] = {}
         self._frame_obs: list[MarkerObservation] = []
@@ -353,7 +353,7 @@ class Localizer:
             return self._detector
         detector: MarkerDetector | None = getattr(self._local, "detector", None)
         if detector is None:
-            detector = self._local.detector = MarkerDetector()
+            detector = self._local.detector = MarkerDetector(marker_ids=self._detector.marker_ids)
         return detector
 
     def observe(
