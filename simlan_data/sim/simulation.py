@@ -34,7 +34,7 @@ from ..constants import FORMAT_VERSION, NS_PER_S
 from ..evaluation.faults import CameraFaults
 from ..evaluation.replay import camera_from_messages
 from ..geometry.camera import CameraModel
-from ..gpss.localization import LocalizerParams
+from ..gpss.localization import ImageSearch, LocalizerParams
 from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
 from ..recording import messages as M
 from ..recording.writer import NullWriter, RecordingWriter
@@ -216,7 +216,7 @@ class Simulation:
         plan: str | list,
         images: CameraImages,
         encoded: Any,
-    ) -> Future[tuple[list, float]]:
+    ) -> Future[ImageSearch]:
         """Search one image for markers, on an encoder thread when there is one.
 
         The localizer sees what the bag holds (the decoded JPEG, which the encoder thread
@@ -225,7 +225,7 @@ class Simulation:
         """
         localizer, cid = stack.localizer, camera.camera_id
 
-        def search() -> tuple[list, float]:
+        def search() -> ImageSearch:
             rgb = encoded.result() if encoded is not None else None
             if rgb is not None:
                 return localizer.detect(cid, plan, jpeg=rgb.data, gray=rgb.gray)
@@ -234,7 +234,7 @@ class Simulation:
 
         if self.cfg.recording.enabled:
             return writer.run_async(search)  # type: ignore[return-value]
-        done: Future[tuple[list, float]] = Future()
+        done: Future[ImageSearch] = Future()
         done.set_result(search())
         return done
 
@@ -297,9 +297,9 @@ class Simulation:
                 for camera, _, plan, search in frames:
                     if plan is None or search is None:
                         continue
-                    detections, seconds = search.result()
-                    mode = stack.camera_detections(t, camera.camera_id, plan, detections, seconds)
-                    pub.detections(t, camera, detections, mode)
+                    found = search.result()
+                    mode = stack.camera_detections(t, camera.camera_id, plan, found)
+                    pub.detections(t, camera, found.detections, mode)
                 stack.close_camera_tick(t)
                 stats.localize_wall_s += time.perf_counter() - loc0
                 if progress is not None:
