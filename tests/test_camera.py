@@ -131,3 +131,19 @@ def test_transform_compose_and_inverse() -> None:
     p = np.array([[0.3, -0.7, 2.0]])
     np.testing.assert_allclose((a @ b).apply(p), a.apply(b.apply(p)))
     np.testing.assert_allclose((a @ a.inverse()).matrix(), np.eye(4), atol=1e-12)
+
+
+def test_few_points_undistort_like_many(cam) -> None:
+    """A marker's corners take the plain-float path; it gives what the array path gives."""
+    from simlan_data.geometry import camera as camera_module
+
+    rng = np.random.default_rng(3)
+    uv = rng.uniform([-30, -30], [990, 570], size=(400, 2))  # valid and invalid pixels
+    many_xy, many_ok = cam.undistort_pixels(uv)
+    assert len(uv) > camera_module.SCALAR_MAX_POINTS
+    few = [cam.undistort_pixels(uv[i : i + 4]) for i in range(0, len(uv), 4)]
+    few_xy = np.concatenate([f[0] for f in few])
+    few_ok = np.concatenate([f[1] for f in few])
+    assert 0 < many_ok.sum() < len(uv)
+    np.testing.assert_array_equal(few_ok, many_ok)
+    np.testing.assert_allclose(few_xy[many_ok], many_xy[many_ok], rtol=0, atol=1e-13)

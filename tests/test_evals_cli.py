@@ -151,7 +151,9 @@ def test_list_shows_cases_faults_and_what_is_pending() -> None:
     assert proc.returncode == 0, proc.stderr
     assert "single_truck" in proc.stdout and "golden_two_robots" in proc.stdout
     assert re.search(r"bias .*\[available\]", proc.stdout)
-    lines = {line.split()[0]: line for line in proc.stdout.splitlines() if line.startswith("  ") and line.split()}
+    lines = {
+        line.split()[0]: line for line in proc.stdout.splitlines() if line.startswith("  ") and line.split()
+    }
     assert "pending" not in lines["restricted_zone"] and "[available]" in lines["safety_condition"]
     assert "pending: needs replay algorithm 'posemap'" in lines["posemap_replay"]
 

@@ -208,3 +208,56 @@ def test_our_ate_agrees_with_evo_ape(short_run: Path) -> None:
     assert ours[f"localization.{NS}.yaw_rmse_deg"] == pytest.approx(
         rot.get_statistic(metrics.StatisticsType.rmse), rel=1e-6
     )
+
+
+def test_detector_restricted_to_the_fleets_ids_finds_the_same_corners(frames) -> None:
+    """Identifying candidates only against the fleet's codes (the speed-up) changes nothing about
+    the markers found: same ids, bit-identical corners, full frames and regions alike."""
+    _, data = frames
+    everything, fleet, other = (
+        MarkerDetector(),
+        MarkerDetector(marker_ids=[1, 7]),
+        MarkerDetector(marker_ids=[2]),
+    )
+    found = 0
+    for _, cid, gray, _ in data[::4]:
+        ref = everything.detect(cid, gray)
+        got = fleet.detect(cid, gray)
+        assert [d.marker_id for d in got] == [d.marker_id for d in ref if d.marker_id in (1, 7)]
+        for a, b in zip(got, [d for d in ref if d.marker_id in (1, 7)]):
+            np.testing.assert_array_equal(a.corners_px, b.corners_px)
+        assert other.detect(cid, gray) == []
+        for d in got:
+            u0, v0 = np.floor(d.corners_px.min(axis=0) - 20).astype(int).clip(0)
+            roi = (int(u0), int(v0), int(d.corners_px[:, 0].max() + 20), int(d.corners_px[:, 1].max() + 20))
+            np.testing.assert_array_equal(
+                fleet.detect(cid, gray, roi)[0].corners_px, everything.detect(cid, gray, roi)[0].corners_px
+            )
+            found += 1
+    assert found >= 5
+    assert MarkerDetector(marker_ids=[]).detect("160", data[0][2]) == []
+    with pytest.raises(ValueError, match=r"marker ids must be in 0\.\.999"):
+        MarkerDetector(marker_ids=[1000])
+
+
+def test_background_reading_hands_over_items_in_order_and_raises_its_errors() -> None:
+    import threading
+
+    from simlan_data.errors import RecordingInputError
+    from simlan_data.evaluation.localization_replay import in_background
+
+    assert list(in_background(iter(range(50)), depth=3)) == list(range(50))
+
+    def broken():
+        yield 1
+        raise RecordingInputError("message undecodable", "bag", "corrupt chunk", "recover it")
+
+    items = in_background(broken(), depth=2)
+    assert next(items) == 1  # the good item first, then the reader's error, in the consumer's thread
+    with pytest.raises(RecordingInputError, match="message undecodable"):
+        next(items)
+    before = threading.active_count()
+    items = in_background(iter(range(10_000)), depth=2)
+    assert next(items) == 0
+    items.close()  # the consumer stops early: the reading thread ends too
+    assert threading.active_count() == before

@@ -197,3 +197,26 @@ def test_restamp_changes_only_the_header_stamp() -> None:
         assert M.stamp_ns_of(again.header.stamp) == stamp
         assert again.header.frame_id == msg.header.frame_id
         assert bytes(store.serialize_cdr(again, msgtype)) == M.restamp(cdr, stamp)
+
+
+def test_an_image_pass_keeps_the_small_topics_for_later_reads(tmp_path: Path) -> None:
+    """Reading images to the end fills the small-topic cache (no second pass over the chunks);
+    what it holds is exactly what a pass over the small topics alone reads, in the same order."""
+    _small_bag(tmp_path / "bag", frames=6)
+    images = ["/camera_1/image_raw/compressed", "/camera_2/depth/image_raw/compressedDepth"]
+    with RecordingReader(tmp_path / "bag") as fresh:
+        alone = [(m.topic, m.stamp_ns, bytes(m.msg)) for m in fresh.messages(raw=True)]
+        small_alone = [x for x in alone if x[0] not in {*images, "/camera_2/image_raw/compressed"}]
+        small_alone = [x for x in small_alone if "/camera_" not in x[0]]
+    with RecordingReader(tmp_path / "bag") as r:
+        seen = [m.topic for m in r.messages(images)]
+        assert seen.count(images[0]) == 6 and seen.count(images[1]) == 6
+        assert r._small is not None, "the image pass did not fill the cache"
+        cached = [(c.topic, s, bytes(d)) for c, s, d in r._small]
+        assert cached == small_alone
+        truth = [m.stamp_ns for m in r.messages(["/ground_truth/poses"])]
+        assert truth == [k * NS_PER_S // 4 for k in range(6)]
+    with RecordingReader(tmp_path / "bag") as r:  # a pass left early keeps nothing half-read
+        for _ in zip(range(2), r.messages(images)):
+            pass
+        assert r._small is None

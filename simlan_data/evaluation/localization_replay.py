@@ -14,9 +14,12 @@ section); ``navigation=false`` skips the navigation metrics.
 from __future__ import annotations
 
 import os
+import queue
+import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import polars as pl
@@ -77,6 +80,80 @@ def marker_mounts(config: dict[str, Any]) -> tuple[list[MarkerMount], dict[str, 
     return mounts, {}
 
 
+FrameSet = tuple[int | None, dict[str, Any], list[tuple[int, str, float, float]]]
+
+
+def frame_sets(reader: RecordingReader, camera_ids: list[str], namespaces: list[str]) -> Iterator[FrameSet]:
+    """One time-ordered pass over the cameras' images and the robots' velocity commands.
+
+    Yields per frame set: its stamp, the JPEG bytes per camera (as the reader gives them: no
+    copy), and the commands (stamp, namespace, v, w) read since the previous frame set, which
+    include every command up to the next frame set's stamp: a control tick's command is known
+    before the filter runs that tick. The reader keeps the small topics it passes for the
+    metrics (no second pass over the bag).
+    """
+    images = {f"/camera_{c}{IMAGE_SUFFIX}": c for c in camera_ids}
+    command_topics = {f"/{ns}/cmd_vel": ns for ns in namespaces}
+    pending: dict[str, Any] = {}
+    pending_t: int | None = None
+    cmds: list[tuple[int, str, float, float]] = []
+    for m in reader.messages([*images, *command_topics]):
+        ns = command_topics.get(m.topic)
+        if ns is not None:
+            cmds.append((m.stamp_ns, ns, m.msg.twist.linear.x, m.msg.twist.angular.z))
+            continue
+        if m.stamp_ns != pending_t:
+            if pending_t is not None:
+                yield pending_t, pending, cmds
+                cmds = []
+            pending, pending_t = {}, m.stamp_ns
+        pending[images[m.topic]] = m.msg.data
+    if pending_t is not None or cmds:
+        yield pending_t, pending, cmds
+
+
+T = TypeVar("T")
+
+
+def in_background(items: Iterator[T], *, depth: int) -> Iterator[T]:
+    """``items``, produced on a thread of their own up to ``depth`` ahead (reading a bag:
+    decompression releases the GIL and overlaps with the searches); its errors are raised here."""
+    q: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(entry: tuple[str, Any]) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(entry, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            for item in items:
+                if not put(("item", item)):
+                    return
+            put(("end", None))
+        except BaseException as err:  # handed to the consumer, raised there
+            put(("error", err))
+
+    thread = threading.Thread(target=produce, name="read", daemon=True)
+    thread.start()
+    try:
+        while True:
+            kind, value = q.get()
+            if kind == "end":
+                return
+            if kind == "error":
+                raise value
+            yield value
+    finally:
+        stop.set()
+        thread.join()
+
+
 def replay_localizer(
     reader: RecordingReader,
     config: dict[str, Any],
@@ -99,15 +176,12 @@ def replay_localizer(
     rows: dict[str, tuple[list, list]] = {m.namespace: ([], []) for m in mounts}
 
     commands: dict[int, list[tuple[str, float, float]]] = {}
-    for ns in rows:
-        for m in reader.messages([f"/{ns}/cmd_vel"]):
-            commands.setdefault(m.stamp_ns, []).append((ns, m.msg.twist.linear.x, m.msg.twist.angular.z))
 
     def control_until(t_ns: int, *, inclusive: bool) -> None:
         nonlocal next_tick
         while next_tick is not None and (next_tick < t_ns or (inclusive and next_tick == t_ns)):
             est = localizer.estimate(next_tick)
-            for ns, v, w in commands.get(next_tick, ()):
+            for ns, v, w in commands.pop(next_tick, ()):
                 localizer.command(next_tick, ns, v, w)
             for ns, (est_rows, status_rows) in rows.items():
                 e = est.get(ns)
@@ -124,16 +198,11 @@ def replay_localizer(
                     est_rows.append((next_tick, e.x_m, e.y_m, yaw_as_recorded(e.yaw_rad)))
             next_tick = next(ticks, None)
 
-    topics = [f"/camera_{c}{IMAGE_SUFFIX}" for c in camera_order]
-    pending: dict[str, bytes] = {}
-    pending_t: int | None = None
-
-    def flush_frame_set() -> None:
-        # the planned images of a frame set are decoded and searched on worker threads at once
-        # (Localizer.detect is a pure function; OpenCV releases the GIL); what they found is
-        # taken in camera order, exactly as the live run and process_image do
-        if pending_t is None:
-            return
+    def flush_frame_set(pending_t: int, pending: dict[str, Any]) -> None:
+        # the planned images of a frame set are decoded and searched, and the markers' poses
+        # computed, on worker threads at once (Localizer.detect is a pure function; OpenCV
+        # releases the GIL); what they found is taken in camera order, exactly as the live run
+        # and process_image do
         control_until(pending_t, inclusive=False)
         planned = [(cid, localizer.search_plan(pending_t, cid)) for cid in camera_order if cid in pending]
         jobs = [
@@ -142,20 +211,21 @@ def replay_localizer(
             if plan
         ]
         for cid, plan, job in jobs:
-            detections, seconds = job.result()
-            localizer.observe(pending_t, cid, plan, detections, seconds)
+            localizer.observe(pending_t, cid, plan, job.result())
         localizer.close_frame(pending_t)
         if consistency is not None:
             consistency.add(localizer.last_observations)
         control_until(pending_t, inclusive=True)
 
+    #   reader thread: bag -> (frame set, commands before the next one) --queue--> this thread:
+    #   plan -> search (worker threads) -> observe in camera order -> fuse -> control ticks
+    sets = frame_sets(reader, camera_order, list(rows))
     with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1), thread_name_prefix="search") as pool:
-        for m in reader.messages(topics):
-            if m.stamp_ns != pending_t:
-                flush_frame_set()
-                pending, pending_t = {}, m.stamp_ns
-            pending[m.topic.split("/")[1].removeprefix("camera_")] = bytes(m.msg.data)
-        flush_frame_set()
+        for stamp_ns, jpegs, cmds in sets if os.environ.get("NOBG") else in_background(sets, depth=4):
+            for t_ns, ns, v, w in cmds:
+                commands.setdefault(t_ns, []).append((ns, v, w))
+            if stamp_ns is not None:
+                flush_frame_set(stamp_ns, jpegs)
     control_until(duration_ns, inclusive=True)
     return localizer, {ns: status_table(est, status) for ns, (est, status) in rows.items()}
 

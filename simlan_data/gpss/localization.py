@@ -21,6 +21,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -188,6 +189,21 @@ class _Track:
     rejected_in_row: int = 0
 
 
+class ImageSearch(NamedTuple):
+    """What the localizer found in one camera image (see :meth:`Localizer.detect`)."""
+
+    detections: list[Detection]  # every marker of the fleet found, sorted by id
+    observations: list[MarkerObservation]  # their poses as this camera sees them (the usable ones)
+    seconds: float  # time spent: decoding, searching, poses
+
+
+@dataclass(frozen=True)
+class _TickPredictions:
+    untracked: bool  # some agent is not tracked (full searches are due)
+    tracks: list[tuple[MarkerMount, NDArray[np.float64], Transform]]  # mount, covariance, marker pose
+    corners: NDArray[np.float64]  # (4 x tracks, 3) their marker corners in map
+
+
 @dataclass
 class FrameTiming:
     """Processing time of one camera image by the localizer."""
@@ -220,12 +236,14 @@ class Localizer:
             )
             for m in self.mounts
         }
-        self._detector = MarkerDetector()
+        self._detector = MarkerDetector(marker_ids=sorted(self._by_marker))
         self._local = threading.local()  # a detector per worker thread (see detect)
         self._prediction_cache: dict[tuple[str, int], tuple] = {}
+        self._tick_cache: dict[int, _TickPredictions] = {}
+        self._slots = {c: i for i, c in enumerate(self.cameras)}
         self._frame_obs: list[MarkerObservation] = []
         self._pending: deque[tuple[int, PoseFix]] = deque()  # (usable from, fix)
-        self._full_cache: dict[tuple[str, bytes], list[Detection]] = {}
+        self._full_cache: dict[tuple[str, bytes], tuple[list[Detection], list[MarkerObservation]]] = {}
         self._frames_seen: dict[str, int] = {}
         self._frame_index: dict[tuple[str, int], int] = {}
         self.timings: list[FrameTiming] = []
@@ -253,25 +271,30 @@ class Localizer:
             self._frames_seen[camera_id] = frame + 1
             self._frame_index = {k: v for k, v in self._frame_index.items() if k[0] != camera_id}
             self._frame_index[(camera_id, t_ns)] = frame
-        untracked = any(not self._tracked(tr, t_ns) for tr in self._tracks.values())
-        slot = list(self.cameras).index(camera_id)
-        if untracked and (frame == 0 or (frame + slot) % self.params.full_search_every == 0):
+        predicted = self._tick_predictions(t_ns)
+        slot = self._slots[camera_id]
+        if predicted.untracked and (frame == 0 or (frame + slot) % self.params.full_search_every == 0):
             return "full"
+        if not predicted.tracks:
+            return []
+        # every tracked marker at once: corners into this camera, the ones fully in front and
+        # inside the valid radius distorted to pixels (cam.project, cheap rejection first)
         cam = self.cameras[camera_id]
+        n = len(predicted.tracks)
+        pc = cam.world_to_camera(predicted.corners).reshape(n, 4, 3)
+        front = (pc[:, :, 2] > 1e-9).all(axis=1)
+        if not front.any():
+            return []
+        z = np.where(pc[:, :, 2:3] > 1e-9, pc[:, :, 2:3], 1.0)
+        xy = pc[:, :, :2] / z
+        seen = front & (np.hypot(xy[:, :, 0], xy[:, :, 1]) <= cam.valid_radius).all(axis=1)
+        if not seen.any():
+            return []
+        idx = np.flatnonzero(seen)
+        uv_all = cam.distort_normalized(xy[idx].reshape(-1, 2)).reshape(len(idx), 4, 2)
         rois: list[Roi] = []
-        for tr in self._tracks.values():
-            if not self._tracked(tr, t_ns):
-                continue
-            _, P, marker, corners = self._predicted_marker(tr, t_ns)
-            m = tr.mount
-            # (cam.project, with the cheap validity test first: most cameras do not see the marker)
-            pc = cam.world_to_camera(corners)
-            if not (pc[:, 2] > 1e-9).all():
-                continue
-            xy = pc[:, :2] / pc[:, 2:3]
-            if not (np.hypot(xy[:, 0], xy[:, 1]) <= cam.valid_radius).all():
-                continue
-            uv = cam.distort_normalized(xy)
+        for k, uv in zip(idx.tolist(), uv_all):
+            m, P, marker = predicted.tracks[k]
             rng = float(np.linalg.norm(marker.translation - cam.position))
             sigma_m = float(np.sqrt(max(P[0, 0], P[1, 1]))) + 0.5 * m.size_m * float(np.sqrt(P[2, 2]))
             margin = self.params.roi_margin_px + 3.0 * sigma_m * cam.K[0, 0] / max(rng, 1e-3)
@@ -281,6 +304,25 @@ class Localizer:
             if u1 - u0 >= 8 and v1 - v0 >= 8:
                 rois.append((int(u0), int(v0), int(u1), int(v1)))
         return rois
+
+    def _tick_predictions(self, t_ns: int) -> _TickPredictions:
+        """Every tracked agent's predicted marker at ``t_ns`` (memoized for the cameras of one
+        tick, cleared whenever the filter changes)."""
+        hit = self._tick_cache.get(t_ns)
+        if hit is None:
+            tracks, corners = [], []
+            for tr in self._tracks.values():
+                if self._tracked(tr, t_ns):
+                    _, P, marker, c = self._predicted_marker(tr, t_ns)
+                    tracks.append((tr.mount, P, marker))
+                    corners.append(c)
+            hit = _TickPredictions(
+                untracked=len(tracks) < len(self._tracks),
+                tracks=tracks,
+                corners=np.concatenate(corners) if corners else np.zeros((0, 3)),
+            )
+            self._tick_cache = {t_ns: hit}
+        return hit
 
     def _predicted_marker(
         self, track: _Track, t_ns: int
@@ -305,80 +347,85 @@ class Localizer:
         plan = self.search_plan(t_ns, camera_id)
         if not plan:
             return []
-        detections, seconds = self.detect(camera_id, plan, jpeg=jpeg, gray=gray)
-        self.observe(t_ns, camera_id, plan, detections, seconds)
-        return detections
+        found = self.detect(camera_id, plan, jpeg=jpeg, gray=gray)
+        self.observe(t_ns, camera_id, plan, found)
+        return found.detections
 
     def detect(
         self,
         camera_id: str,
         plan: str | list[Roi],
         *,
-        jpeg: bytes | None = None,
+        jpeg: bytes | NDArray[np.uint8] | None = None,
         gray: NDArray[np.uint8] | None = None,
-    ) -> tuple[list[Detection], float]:
-        """The image part of :meth:`process_image`: markers found as planned, and the seconds spent.
+    ) -> ImageSearch:
+        """The image part of :meth:`process_image`: markers found as planned, their poses seen
+        from this camera, and the seconds spent.
 
         A pure function of the image and the plan, safe to run on worker threads (each thread
-        has its own detector; OpenCV releases the GIL) while the simulation renders on.
+        has its own detector; OpenCV releases the GIL) while the simulation renders on, or
+        while a replay reads on.
         """
         t0 = time.perf_counter()
+        data = None if jpeg is None else np.frombuffer(jpeg, dtype=np.uint8)
         key = (
-            (camera_id, hashlib.blake2b(jpeg, digest_size=16).digest())
-            if (plan == "full" and jpeg is not None)
+            (camera_id, hashlib.blake2b(data.data, digest_size=16).digest())
+            if (plan == "full" and data is not None)
             else None
         )
         cached = self._full_cache.get(key) if key is not None else None
         if cached is not None:
-            return cached, time.perf_counter() - t0
+            return ImageSearch(cached[0], cached[1], time.perf_counter() - t0)
         if gray is None:
-            assert jpeg is not None
-            gray = cv2.imdecode(np.frombuffer(jpeg, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+            assert data is not None
+            gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
         detector = self._thread_detector()
         if plan == "full":
             detections = detector.detect(camera_id, gray)
-            if key is not None:  # (a lost entry only costs a search again: the content is the same)
-                self._full_cache = {k: v for k, v in self._full_cache.items() if k[0] != camera_id}
-                self._full_cache[key] = detections
         else:
             found: dict[int, Detection] = {}
             for roi in plan:
                 for d in detector.detect(camera_id, gray, roi):
                     found.setdefault(d.marker_id, d)
             detections = [found[k] for k in sorted(found)]
-        return detections, time.perf_counter() - t0
+        observations = self._poses(camera_id, detections)
+        if key is not None:  # (a lost entry only costs a search again: the content is the same)
+            self._full_cache = {k: v for k, v in self._full_cache.items() if k[0] != camera_id}
+            self._full_cache[key] = (detections, observations)
+        return ImageSearch(detections, observations, time.perf_counter() - t0)
 
-    def _thread_detector(self) -> MarkerDetector:
-        if threading.current_thread() is threading.main_thread():
-            return self._detector
-        detector: MarkerDetector | None = getattr(self._local, "detector", None)
-        if detector is None:
-            detector = self._local.detector = MarkerDetector()
-        return detector
-
-    def observe(
-        self, t_ns: int, camera_id: str, plan: str | list[Roi], detections: list[Detection], seconds: float
-    ) -> None:
-        """The state part of :meth:`process_image`: marker poses into this frame set's observations.
-
-        Call in camera order (fusion sums in that order), after :meth:`detect` with the same plan.
-        """
-        t0 = time.perf_counter()
+    def _poses(self, camera_id: str, detections: list[Detection]) -> list[MarkerObservation]:
+        """The usable marker poses of one camera's detections (known marker, valid, large enough)."""
+        out = []
         for det in detections:
             mount = self._by_marker.get(det.marker_id)
             if mount is None:
                 continue
             obs = self._pose(self.cameras[camera_id], det, mount)
             if obs is not None and obs.side_px >= self.params.min_side_px:
-                self._frame_obs.append(obs)
-        self.last_detections[camera_id] = detections
+                out.append(obs)
+        return out
+
+    def _thread_detector(self) -> MarkerDetector:
+        if threading.current_thread() is threading.main_thread():
+            return self._detector
+        detector: MarkerDetector | None = getattr(self._local, "detector", None)
+        if detector is None:
+            detector = self._local.detector = MarkerDetector(marker_ids=self._detector.marker_ids)
+        return detector
+
+    def observe(self, t_ns: int, camera_id: str, plan: str | list[Roi], found: ImageSearch) -> None:
+        """The state part of :meth:`process_image`: this image's marker poses into the frame
+        set's observations.
+
+        Call in camera order (fusion sums in that order), with what :meth:`detect` returned for
+        the same plan.
+        """
+        self._frame_obs.extend(found.observations)
+        self.last_detections[camera_id] = found.detections
         self.timings.append(
             FrameTiming(
-                camera_id,
-                t_ns,
-                "full" if plan == "full" else "roi",
-                seconds + time.perf_counter() - t0,
-                len(detections),
+                camera_id, t_ns, "full" if plan == "full" else "roi", found.seconds, len(found.detections)
             )
         )
 
@@ -412,6 +459,7 @@ class Localizer:
     def estimate(self, t_ns: int) -> dict[str, PoseEstimate]:
         """Apply the fixes that are due, then every agent's pose at ``t_ns``."""
         self._prediction_cache.clear()
+        self._tick_cache.clear()
         while self._pending and self._pending[0][0] <= t_ns:
             _, fix = self._pending.popleft()
             track = self._tracks[fix.namespace]
@@ -460,6 +508,7 @@ class Localizer:
         track = self._tracks.get(namespace)
         if track is not None:
             self._prediction_cache.clear()
+            self._tick_cache.clear()
             track.ekf.command(t_ns, linear_mps, angular_rps)
 
     def track_stats(self) -> dict[str, tuple[int, int]]:

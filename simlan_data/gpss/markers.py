@@ -53,7 +53,17 @@ class MarkerObservation:
     side_px: float
 
 
-def _detector(min_perimeter_rate: float) -> cv2.aruco.ArucoDetector:
+def _dictionary(marker_ids: tuple[int, ...] | None) -> cv2.aruco.Dictionary:
+    """DICT_5X5_1000, or only its codes of ``marker_ids`` (in that order: index i is id ids[i])."""
+    full = cv2.aruco.getPredefinedDictionary(ARUCO_DICTIONARY)
+    if marker_ids is None:
+        return full
+    return cv2.aruco.Dictionary(
+        np.ascontiguousarray(full.bytesList[list(marker_ids)]), full.markerSize, full.maxCorrectionBits
+    )
+
+
+def _detector(min_perimeter_rate: float, dictionary: cv2.aruco.Dictionary) -> cv2.aruco.ArucoDetector:
     params = cv2.aruco.DetectorParameters()
     params.minMarkerPerimeterRate = min_perimeter_rate
     params.perspectiveRemovePixelPerCell = 8  # small markers: sample each cell finely
@@ -61,7 +71,7 @@ def _detector(min_perimeter_rate: float) -> cv2.aruco.ArucoDetector:
     # contour refinement 0.59 deg / 0.28 cm, no refinement 0.92 deg / 0.57 cm, sub-pixel corner
     # refinement 1.26 deg / 0.67 cm (it drifts towards the cells' inner edges on small markers)
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_CONTOUR
-    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(ARUCO_DICTIONARY), params)
+    return cv2.aruco.ArucoDetector(dictionary, params)
 
 
 class MarkerDetector:
@@ -70,12 +80,37 @@ class MarkerDetector:
     The minimum marker size is relative to the searched image: in a full 960x540 frame markers
     from 10 px across are kept (perimeter rate 0.04; smaller rates only cost time, measured);
     in a region around a predicted marker the marker is at least a sixth of the region, and the
-    rate of 0.15 keeps the detector from chasing tiny contours (0.2 ms per region instead of 13).
+    rate of 0.15 keeps the detector from chasing tiny contours.
+
+    ``marker_ids`` (the markers the fleet carries) restricts identification to those codes of the
+    dictionary. OpenCV compares every candidate square (most are not markers: shelf edges,
+    texture) with every code of the dictionary in four rotations; against all 1000 codes that
+    was 80-90 % of the detection time (measured on recorded 960x540 frames: a region 1.2 ->
+    0.19 ms, a full frame 37 -> 4.4 ms with four ids). The markers found are the same, with the
+    same corners: DICT_5X5_1000's codes are at least 5 bits apart and OpenCV corrects at most
+    one bit (maxCorrectionBits 2 x errorCorrectionRate 0.6), so a candidate matches at most one
+    code whichever subset is searched. Markers of other ids are then not reported at all.
     """
 
-    def __init__(self, *, full_rate: float = 0.04, roi_rate: float = 0.15) -> None:
-        self._full = _detector(full_rate)
-        self._roi = _detector(roi_rate)
+    def __init__(
+        self,
+        *,
+        full_rate: float = 0.04,
+        roi_rate: float = 0.15,
+        marker_ids: tuple[int, ...] | list[int] | None = None,
+    ) -> None:
+        ids = None if marker_ids is None else tuple(sorted({int(i) for i in marker_ids}))
+        size = cv2.aruco.getPredefinedDictionary(ARUCO_DICTIONARY).bytesList.shape[0]
+        if ids is not None and any(not 0 <= i < size for i in ids):
+            raise ValueError(f"marker ids must be in 0..{size - 1} (DICT_5X5_1000), got {list(ids)}")
+        self.marker_ids = ids
+        self._ids = None if ids is None else np.asarray(ids, dtype=np.int64)
+        self._full: cv2.aruco.ArucoDetector | None = None
+        self._roi: cv2.aruco.ArucoDetector | None = None
+        if ids is None or ids:  # (no id at all: nothing to look for)
+            dictionary = _dictionary(ids)
+            self._full = _detector(full_rate, dictionary)
+            self._roi = _detector(roi_rate, dictionary)
 
     def detect(
         self, camera_id: str, gray: NDArray[np.uint8], roi: tuple[int, int, int, int] | None = None
@@ -88,16 +123,19 @@ class MarkerDetector:
             image, detector = gray[v0:v1, u0:u1], self._roi
             if image.size == 0:
                 return []
+        if detector is None:
+            return []
         corners, ids, _ = detector.detectMarkers(image)
         if ids is None:
             return []
+        found = ids.ravel() if self._ids is None else self._ids[ids.ravel()]
         out = [
             Detection(
                 camera_id,
                 int(i),
                 np.asarray(c, dtype=np.float64).reshape(4, 2) + np.array([u0, v0], dtype=np.float64),
             )
-            for c, i in zip(corners, ids.ravel())
+            for c, i in zip(corners, found)
         ]
         return sorted(out, key=lambda d: (d.marker_id, float(d.corners_px[0, 0]), float(d.corners_px[0, 1])))
 

@@ -27,7 +27,7 @@ from ..agent_types import MARKER_SIZE_M, AgentType
 from ..geometry.camera import CameraModel
 from .coordinator import Coordinator, Decision, Intent, footprint_polygon, swept_claim
 from .follower import FollowerParams, PursuitParams, WaypointFollower
-from .localization import Localizer, LocalizerParams, PoseEstimate
+from .localization import ImageSearch, Localizer, LocalizerParams, PoseEstimate
 from .markers import MarkerMount
 from .navigation import Navigator
 from .occupancy import OccupancyGrid
@@ -183,11 +183,9 @@ class GpssStack:
             return None  # not a localizer camera (e.g. dropped by a fault): recorded, never searched
         return self.localizer.search_plan(t_ns, camera_id) or None
 
-    def camera_detections(
-        self, t_ns: int, camera_id: str, plan: str | list, detections: list, seconds: float
-    ) -> str:
+    def camera_detections(self, t_ns: int, camera_id: str, plan: str | list, found: ImageSearch) -> str:
         """Take what :meth:`Localizer.detect` found in a planned image (in camera order)."""
-        self.localizer.observe(t_ns, camera_id, plan, detections, seconds)
+        self.localizer.observe(t_ns, camera_id, plan, found)
         return "full" if plan == "full" else "roi"
 
     def people_frame(self, camera_id: str, labels: NDArray[np.uint8] | None) -> None:

@@ -240,10 +240,13 @@ class RecordingReader:
     ) -> Iterator[tuple[Any, int, bytes]]:
         """(connection, log time, CDR bytes) in log-time order; small topics from the cache."""
         small = [c for c in self._reader.connections if c.msgtype not in STREAMED_TYPES]
-        cacheable = (
-            all(c.msgtype not in STREAMED_TYPES for c in conns)
-            and sum(c.msgcount for c in small) <= SMALL_TOPICS_CACHE_MAX_MESSAGES
-        )
+        fits = sum(c.msgcount for c in small) <= SMALL_TOPICS_CACHE_MAX_MESSAGES
+        cacheable = fits and all(c.msgtype not in STREAMED_TYPES for c in conns)
+        if not cacheable and fits and cache and self._small is None and start_ns is stop_ns is None:
+            # a whole pass over images decompresses every chunk anyway: keep the small topics
+            # that pass by, so that reading them afterwards costs no second pass
+            yield from self._stream_filling_cache(conns, small)
+            return
         if not cacheable or (self._small is None and not cache):
             yield from self._reader.messages(connections=conns, start=start_ns, stop=stop_ns)
             return
@@ -257,6 +260,18 @@ class RecordingReader:
         for conn, stamp, data in self._small:
             if conn.id in ids and lo <= stamp < hi:
                 yield conn, stamp, data
+
+    def _stream_filling_cache(self, conns: list[Any], small: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
+        """``conns``' messages from a pass that reads the small topics too and caches them."""
+        wanted = {c.id for c in conns}
+        every = {c.id: c for c in [*conns, *small]}
+        kept: list[tuple[Any, int, bytes]] = []
+        for conn, stamp, data in self._reader.messages(connections=list(every.values())):
+            if conn.msgtype not in STREAMED_TYPES:
+                kept.append((conn, stamp, data))
+            if conn.id in wanted:
+                yield conn, stamp, data
+        self._small = kept  # (only a pass read to its end fills the cache)
 
     def first(self, topic: str) -> Message | None:
         """The first message of ``topic`` (reads only what it needs unless small topics are cached)."""

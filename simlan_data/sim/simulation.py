@@ -36,7 +36,7 @@ from ..constants import FORMAT_VERSION, NS_PER_S
 from ..evaluation.faults import CameraFaults
 from ..evaluation.replay import camera_from_messages
 from ..geometry.camera import CameraModel
-from ..gpss.localization import LocalizerParams
+from ..gpss.localization import ImageSearch, LocalizerParams
 from ..gpss.people import PeopleParams
 from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
 from ..recording import messages as M
@@ -221,7 +221,7 @@ class Simulation:
         plan: str | list,
         images: CameraImages,
         encoded: Any,
-    ) -> Future[tuple[list, float]]:
+    ) -> Future[ImageSearch]:
         """Search one image for markers, on an encoder thread when there is one.
 
         The localizer sees what the bag holds (the decoded JPEG, which the encoder thread
@@ -230,7 +230,7 @@ class Simulation:
         """
         localizer, cid = stack.localizer, camera.camera_id
 
-        def search() -> tuple[list, float]:
+        def search() -> ImageSearch:
             rgb = encoded.result() if encoded is not None else None
             if rgb is not None:
                 return localizer.detect(cid, plan, jpeg=rgb.data, gray=rgb.gray)
@@ -239,7 +239,7 @@ class Simulation:
 
         if self.cfg.recording.enabled:
             return writer.run_async(search)  # type: ignore[return-value]
-        done: Future[tuple[list, float]] = Future()
+        done: Future[ImageSearch] = Future()
         done.set_result(search())
         return done
 
@@ -302,9 +302,9 @@ class Simulation:
                 stats.render_wall_s += loc0 - render0
                 for camera, images, plan, search in frames:
                     if plan is not None and search is not None:
-                        detections, seconds = search.result()
-                        mode = stack.camera_detections(t, camera.camera_id, plan, detections, seconds)
-                        pub.detections(t, camera, detections, mode)
+                        found = search.result()
+                        mode = stack.camera_detections(t, camera.camera_id, plan, found)
+                        pub.detections(t, camera, found.detections, mode)
                     stack.people_frame(camera.camera_id, images.labels)
                 stack.close_camera_tick(t)
                 if stack.last_people is not None:
