@@ -20,7 +20,9 @@ from pathlib import Path
 
 import polars as pl
 import pytest
+import yaml
 
+from conftest import REPO
 from simlan_data import evals
 from simlan_data.errors import ConfigError
 from simlan_data.evaluation.suite import FAILING
@@ -104,9 +106,21 @@ def test_each_injected_fault_turns_the_suite_red(name: str, tmp_path: Path) -> N
 
 
 def test_a_pending_fault_cannot_be_injected(tmp_path: Path) -> None:
-    pending = [f for f in SUITE.faults.values() if f.pending]
-    if not pending:
-        pytest.skip("no pending fault: every capability has landed")
-    with pytest.raises(ConfigError, match=f"fault '{pending[0].name}' is pending in --inject: needs"):
-        evals.main(["golden", "--inject", pending[0].name, "--out", str(tmp_path / "x")])
+    """A fault whose capability has not landed (here: a config key that does not exist) is
+    refused before anything runs; the golden suite's own faults have all landed."""
+    spec = yaml.safe_load((REPO / "evals" / "base.yaml").read_text())
+    spec["faults"]["future"] = {
+        "description": "a capability that has not landed",
+        "requires": ["config:safety.no_such_condition"],
+        "pending_note": "some later issue",
+        "run": ["safety.no_such_condition.enabled=false"],
+        "expect": ["safety.missed"],
+    }
+    for case in spec["suites"]["golden"]["cases"].values():
+        case["recording"] = str((REPO / "evals" / case["recording"]).resolve())
+    spec["suites"]["golden"]["baseline"] = str(SUITE.baseline)
+    suite_file = tmp_path / "suite.yaml"
+    suite_file.write_text(yaml.safe_dump(spec, sort_keys=False))
+    with pytest.raises(ConfigError, match="fault 'future' is pending in --inject: needs"):
+        evals.main(["golden", "--file", str(suite_file), "--inject", "future", "--out", str(tmp_path / "x")])
     assert not (tmp_path / "x").exists()
