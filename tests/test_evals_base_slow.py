@@ -25,8 +25,12 @@ def test_the_base_suite_passes_on_the_current_code(tmp_path: Path) -> None:
     failing = summary.filter(pl.col("verdict").is_in(FAILING))
     assert proc.returncode == 0, f"{proc.stdout[-3000:]}\n{proc.stderr[-2000:]}\n{failing}"
     ran = summary.filter(pl.col("verdict") != "pending")
-    assert set(ran["case"]) >= {"single_truck", "multi_robot", "default"}
-    assert (ran["n"] == 3).all()
+    assert set(ran["case"]) >= {
+        "single_truck", "multi_robot", "default", "restricted_zone", "blind_spot", "humanoid_crossing",
+    }  # fmt: skip
+    grid = ran["case"].str.starts_with("collision_slice[")
+    assert grid.sum() == 2 * 9  # 9 cells, 2 checks each, one seed
+    assert (ran.filter(grid)["n"] == 1).all() and (ran.filter(~grid)["n"] == 3).all()
     # every check with a tolerance was compared with the accepted baseline
     assert ran.filter(pl.col("tolerance").is_not_null())["baseline_mean"].null_count() == 0
     assert "GREEN" in (out / "report.md").read_text()
