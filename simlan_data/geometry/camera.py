@@ -17,6 +17,7 @@ import bisect
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import cv2
 import numpy as np
@@ -33,6 +34,23 @@ MIN_RADIAL_SLOPE = 0.1
 SCALAR_MAX_POINTS = 8
 
 _GL_FROM_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def _newton_terms(
+    x: Any, y: Any, xd: Any, yd: Any, k1: float, k2: float, p1: float, p2: float, k3: float
+) -> tuple[Any, Any, Any]:
+    """One Newton step of inverting OpenCV's distortion at (x, y) towards (xd, yd): the Jacobian's
+    determinant and the two numerators of the step (floats or arrays alike, the same operations in
+    the same order, so the scalar and the vectorized path agree to the last bit)."""
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    dR = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+    ex = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
+    ey = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
+    a = radial + 2.0 * x * x * dR + 2.0 * p1 * y + 6.0 * p2 * x
+    b = 2.0 * x * y * dR + 2.0 * p1 * x + 2.0 * p2 * y
+    d = radial + 2.0 * y * y * dR + 6.0 * p1 * y + 2.0 * p2 * x
+    return a * d - b * b, d * ex - b * ey, a * ey - b * ex
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,18 +167,10 @@ class CameraModel:
         xdc, ydc = xd[candidate], yd[candidate]
         x, y = xdc * scale, ydc * scale
         for _ in range(8):
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            dR = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-            ex = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xdc
-            ey = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - ydc
-            a = radial + 2.0 * x * x * dR + 2.0 * p1 * y + 6.0 * p2 * x
-            b = 2.0 * x * y * dR + 2.0 * p1 * x + 2.0 * p2 * y
-            d = radial + 2.0 * y * y * dR + 6.0 * p1 * y + 2.0 * p2 * x
-            det = a * d - b * b
+            det, num_x, num_y = _newton_terms(x, y, xdc, ydc, k1, k2, p1, p2, k3)
             det = np.where(np.abs(det) < 1e-12, 1e-12, det)
-            step_x = (d * ex - b * ey) / det
-            step_y = (a * ey - b * ex) / det
+            step_x = num_x / det
+            step_y = num_y / det
             x = x - step_x
             y = y - step_y
             if np.max(np.abs(step_x) + np.abs(step_y), initial=0.0) < 1e-13:
@@ -198,19 +208,11 @@ class CameraModel:
             scale = r0 / rd if rd > 1e-12 else 1.0
             x, y = xd * scale, yd * scale
             for _ in range(8):
-                r2 = x * x + y * y
-                radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-                dR = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-                ex = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
-                ey = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
-                a = radial + 2.0 * x * x * dR + 2.0 * p1 * y + 6.0 * p2 * x
-                b = 2.0 * x * y * dR + 2.0 * p1 * x + 2.0 * p2 * y
-                d = radial + 2.0 * y * y * dR + 6.0 * p1 * y + 2.0 * p2 * x
-                det = a * d - b * b
+                det, num_x, num_y = _newton_terms(x, y, xd, yd, k1, k2, p1, p2, k3)
                 if abs(det) < 1e-12:
                     det = 1e-12
-                step_x = (d * ex - b * ey) / det
-                step_y = (a * ey - b * ex) / det
+                step_x = num_x / det
+                step_y = num_y / det
                 x, y = x - step_x, y - step_y
                 if abs(step_x) + abs(step_y) < 1e-13:
                     break
