@@ -54,7 +54,7 @@ def localizer_params(config: dict[str, Any], overrides: dict[str, Any] | None = 
         unobserved_timeout_s=float(loc.get("unobserved_timeout_s", defaults.unobserved_timeout_s)),
         lost_timeout_s=float(loc.get("lost_timeout_s", defaults.lost_timeout_s)),
         processing_delay_s=float(loc.get("processing_delay_s", defaults.processing_delay_s)),
-        bias_m=tuple(loc.get("bias_m", defaults.bias_m)),  # type: ignore[arg-type]
+        bias_m=tuple(loc.get("bias_m", defaults.bias_m)),
     )
 
 

@@ -32,7 +32,7 @@ class OccupancyGrid:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.occupied.shape  # type: ignore[return-value]
+        return self.occupied.shape
 
     def to_cell(self, xy: NDArray[np.float64] | tuple[float, float]) -> tuple[int, int]:
         x, y = float(xy[0]), float(xy[1])

@@ -58,7 +58,8 @@ def load_cameras(cfg: Config) -> tuple[list[CameraModel], list[str]]:
     cam_cfg = cfg.cameras
     directory = Path(cam_cfg.calibration_dir) if cam_cfg.calibration_dir else None
     available = available_camera_ids(directory)
-    cameras, issues = [], []
+    cameras: list[CameraModel] = []
+    issues: list[str] = []
     for cid in cam_cfg.ids:
         if str(cid) not in available:
             where = str(directory) if directory else "the packaged calibrations"
@@ -206,8 +207,8 @@ class Scene:
         labels = LabelTable()
         for body, label in world.labels.items():
             labels.set(body, label)
-        for agent in cfg.agent_list:
-            _check_spawn_clear(cid, agent, inputs.agent_types[agent.namespace], world)
+        for agent_cfg in cfg.agent_list:
+            _check_spawn_clear(cid, agent_cfg, inputs.agent_types[agent_cfg.namespace], world)
         cam_cfg = cfg.cameras
         renderers = [
             CameraRenderer(

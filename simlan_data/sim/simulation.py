@@ -206,7 +206,7 @@ class Simulation:
                 unobserved_timeout_s=loc.unobserved_timeout_s,
                 lost_timeout_s=loc.lost_timeout_s,
                 processing_delay_s=loc.processing_delay_s,
-                bias_m=tuple(loc.bias_m),
+                bias_m=(float(loc.bias_m[0]), float(loc.bias_m[1])),
             ),
             source=loc.source,
             safety=cfg.safety_params(),

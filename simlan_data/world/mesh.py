@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,9 @@ class MeshBuilder:
 
     def add_box(self, half_extents: Iterable[float], pose: Transform) -> None:
         h = np.asarray(list(half_extents), dtype=float)
-        verts, normals, faces = [], [], []
+        verts: list[FloatArray] = []
+        normals: list[Any] = []
+        faces: list[tuple[int, int, int]] = []
         for normal, corners in _BOX_FACES:
             base = len(verts)
             for c in corners:
