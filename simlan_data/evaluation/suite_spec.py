@@ -27,6 +27,8 @@ Layout (every key is checked; a bad one is one error line naming the place)::
             pending_note: ...    # what the case waits for (shown with "pending:")
             replay: {ALGORITHM: {OPTION: VALUE}}      # replays of every recording (options that
                                  # name files, e.g. posemap's model, are relative to this file)
+            faults: [NAME, ...]  # optional: the faults that act on it (default: all; [] = none,
+                                 # e.g. a case without the cameras a fault names)
             metrics: {SOURCE: {METRIC: {max, min, tolerance, rel_tolerance, better}}}
 
 SOURCE is ``run`` (the run's metrics.json) or a replay algorithm of the case. A requirement is
@@ -79,6 +81,11 @@ class Case:
     pending: str = ""  # why it cannot run yet ("" = it can)
     grid: dict[str, Any] = field(default_factory=dict)  # the grid cell this case is (key -> value)
     family: str = ""  # the case name before grid expansion
+    faults: tuple[str, ...] | None = None  # the faults that act on it (None: every one)
+
+    def subject_to(self, faults: list[Fault]) -> list[Fault]:
+        """The injected faults that act on this case."""
+        return [f for f in faults if self.faults is None or f.name in self.faults]
 
 
 @dataclass(frozen=True)
@@ -261,7 +268,9 @@ def _override_value(value: Any) -> str:
     return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
 
 
-def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: str) -> list[Case]:
+def _cases(
+    name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: str, fault_names: list[str]
+) -> list[Case]:
     e = _mapping(entry, where)
     _known_keys(
         e,
@@ -275,6 +284,7 @@ def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: s
             "pending_note",
             "replay",
             "metrics",
+            "faults",
         ),
         where,
     )
@@ -303,6 +313,17 @@ def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: s
                 f"known: {', '.join(sorted(REPLAY_ALGORITHMS))}",
                 "fix the name",
             )
+    subject: tuple[str, ...] | None = None
+    if "faults" in e:
+        subject = _strings(e.get("faults"), f"{where}.faults")
+        unknown = [f for f in subject if f not in fault_names]
+        if unknown:
+            raise _err(
+                f"{where}.faults",
+                f"unknown fault {unknown[0]!r}",
+                f"faults: {', '.join(fault_names) or '(none)'}",
+                "fix the name",
+            )
     rec = (base / str(recording)).resolve() if recording is not None else None
     description = str(e.get("description", ""))
     cells = _grid_cells(_mapping(e.get("grid"), f"{where}.grid"), f"{where}.grid") if "grid" in e else [{}]
@@ -321,6 +342,7 @@ def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: s
                 pending,
                 cell,
                 name,
+                subject,
             )
         )
     return out
@@ -379,7 +401,9 @@ def load_suite(path: Path, name: str, *, seeds: int | None = None) -> Suite:
         )
     cases: list[Case] = []
     for cname, centry in _mapping(s.get("cases"), f"{where}: suites.{name}.cases").items():
-        cases += _cases(str(cname), centry, s, path.parent, f"{where}: suites.{name}.cases.{cname}")
+        cases += _cases(
+            str(cname), centry, s, path.parent, f"{where}: suites.{name}.cases.{cname}", list(faults)
+        )
     if not cases:
         raise _err(f"{where}: suites.{name}", "no cases", "a suite needs at least one case", "add cases:")
     return Suite(
