@@ -20,6 +20,7 @@ from conftest import DATASET_ARGS, REPO, run_cli
 from simlan_data._pybullet import pb
 from simlan_data.agent_types import AGENT_TYPES
 from simlan_data.constants import URDF_DIR
+from simlan_data.errors import RecordingInputError
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.gpss.posemap import skeleton as S
 from simlan_data.gpss.posemap.dataset import read_dataset, split_of
@@ -312,6 +313,20 @@ def test_motion_run_records_a_landmark_stream_the_drive_can_replay(
     metrics = json.loads((tmp_path / "drive" / "metrics.json").read_text())
     assert metrics["posemap.drive.frames"] == 6  # 1 s of 5 Hz landmark frames
     assert 0 < metrics["posemap.drive.mae_rad"] < 1.0  # against the motion run's joint states
+    # the replay of the motion recording scores the same predictions: one reader, one predictor
+    from simlan_data import replay
+
+    out = tmp_path / "replay"
+    replay.main(
+        [str(tmp_path / "motion"), "--out", str(out), "--algorithms", "posemap", "--set", f"model={run}"]
+    )
+    replayed = json.loads((out / "metrics.json").read_text())
+    assert replayed["replay.posemap.mae_rad"] == pytest.approx(metrics["posemap.drive.mae_rad"], abs=1e-12)
+    assert replayed["replay.posemap.mpjpe_m"] == pytest.approx(metrics["posemap.drive.mpjpe_m"], abs=1e-12)
+    # the drive's own recording is refused: its joint states are the model's output, not truth
+    with pytest.raises(RecordingInputError, match=r"recording is a drive's output in .*drive"):
+        replay.main([str(tmp_path / "drive"), "--out", str(tmp_path / "r2"), "--algorithms", "posemap",
+                     "--set", f"model={run}"])  # fmt: skip
 
 
 # ------------------------------------------------------------------------------------ bad input
