@@ -11,6 +11,7 @@ import json
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import polars as pl
 import pytest
@@ -19,10 +20,12 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from conftest import REPO, run_cli
-from simlan_data import replay
+from simlan_data import evals, replay
 from simlan_data.errors import SimlanError
 from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
 from simlan_data.evaluation.posemap_inputs import stream_from_recording
+from simlan_data.evaluation.suite import Job
+from simlan_data.evaluation.suite_report import plot_posemap
 from simlan_data.evaluation.suite_spec import load_suite
 from simlan_data.gpss.posemap.skeleton import JOINT_NAMES
 from simlan_data.gpss.posemap.training import TrainedMapper
@@ -106,6 +109,12 @@ def test_replay_scores_the_model_against_the_recorded_targets(
     stream = stream_from_recording(str(motion), TrainedMapper(str(model_run)).cameras, "robot_agent_1")
     again = TrainedMapper(str(model_run)).predict(stream.landmarks, position=stream.position)
     assert np.allclose(again, pred, atol=1e-9)
+    # and the suite report draws it (error over time per seed, worst joints)
+    (case,) = [c for c in load_suite(evals.DEFAULT_FILE, "base").cases if c.name == "posemap_replay"]
+    suite_out = tmp_path / "suite"
+    shutil.copytree(out, suite_out / "replays" / "posemap_replay__s0" / "posemap")
+    png = plot_posemap(tmp_path / "pm.png", case, [Job(case, 0, "posemap_replay__s0", motion)], suite_out)
+    assert png is not None and cv2.imread(str(png)).shape[1] > 500
 
 
 def _model_copy(model_run: Path, tmp_path: Path, edit) -> Path:
