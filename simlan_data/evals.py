@@ -106,6 +106,8 @@ def list_suite_file(path: Path) -> str:
             listed.add(c.family)
             name = f"{c.family} (grid of {len(cells)})" if c.grid else c.name
             status = f"pending: {c.pending}" if c.pending else f"{len(c.seeds)} seeds, {len(c.checks)} checks"
+            if c.faults is not None:
+                status += f"; faults acting: {', '.join(c.faults) or 'none'}"
             lines.append(f"  {name:<28} {status}")
     suite = load_suite(path, next(iter(doc.get("suites") or {})))
     lines.append("faults (--inject):")

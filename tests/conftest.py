@@ -51,3 +51,36 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     )
     assert proc.returncode == 0, proc.stderr
     return run_dir
+
+
+# ---------------------------------------------------------------------------------- pose mapping
+DATASET_ARGS = (
+    "experiment=posemap_dataset",
+    "world.fidelity=empty",
+    "cameras.width=480",
+    "cameras.height=270",
+    "progress=false",
+)
+
+
+@pytest.fixture(scope="session")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A 600-sample ray-occlusion dataset and a fusion model trained on it (seconds)."""
+    root = tmp_path_factory.mktemp("posemap")
+    ds = root / "dataset"
+    proc = run_cli(*DATASET_ARGS, "posemap.samples=600", "posemap.occlusion=rays", f"hydra.run.dir={ds}")
+    assert proc.returncode == 0, proc.stderr
+    run = root / "train"
+    proc = run_cli(
+        "experiment=posemap_train",
+        f"posemap.dataset={ds}",
+        "posemap.epochs=40",
+        "posemap.width=128",
+        "posemap.layers=2",
+        "posemap.dropout=0.0",
+        "posemap.lr=0.003",
+        f"hydra.run.dir={run}",
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "trained" in proc.stdout
+    return ds, run

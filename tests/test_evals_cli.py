@@ -155,7 +155,10 @@ def test_list_shows_cases_faults_and_what_is_pending() -> None:
         line.split()[0]: line for line in proc.stdout.splitlines() if line.startswith("  ") and line.split()
     }
     assert "pending" not in lines["restricted_zone"] and "[available]" in lines["safety_condition"]
-    assert "pending: needs replay algorithm 'posemap'" in lines["posemap_replay"]
+    assert "faults acting: none" in lines["posemap_replay"]
+    assert "pending" not in lines["posemap_replay"] and re.search(
+        r"\d+ seeds, \d+ checks", lines["posemap_replay"]
+    )
 
 
 @pytest.mark.parametrize(

@@ -16,10 +16,11 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from conftest import REPO, run_cli
+from conftest import DATASET_ARGS, REPO, run_cli
 from simlan_data._pybullet import pb
 from simlan_data.agent_types import AGENT_TYPES
 from simlan_data.constants import URDF_DIR
+from simlan_data.errors import RecordingInputError
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.gpss.posemap import skeleton as S
 from simlan_data.gpss.posemap.dataset import read_dataset, split_of
@@ -192,15 +193,6 @@ def test_projection_estimator_output_is_mediapipe_shaped() -> None:
 
 
 # ------------------------------------------------------------------------------------- datasets
-DATASET_ARGS = (
-    "experiment=posemap_dataset",
-    "world.fidelity=empty",
-    "cameras.width=480",
-    "cameras.height=270",
-    "progress=false",
-)
-
-
 def test_dataset_is_deterministic_per_seed(tmp_path: Path) -> None:
     digests = []
     for name, seed in (("a", 7), ("b", 7), ("c", 8)):
@@ -237,29 +229,6 @@ def test_split_is_by_sample_and_stable() -> None:
     assert abs((split == "test").mean() - 0.15) < 0.01 and abs((split == "val").mean() - 0.1) < 0.01
     # a sample keeps its split when the dataset grows
     assert np.array_equal(split_of(ids[:500], val_fraction=0.1, test_fraction=0.15), split[:500])
-
-
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """A 600-sample ray-occlusion dataset and a fusion model trained on it (seconds)."""
-    root = tmp_path_factory.mktemp("posemap")
-    ds = root / "dataset"
-    proc = run_cli(*DATASET_ARGS, "posemap.samples=600", "posemap.occlusion=rays", f"hydra.run.dir={ds}")
-    assert proc.returncode == 0, proc.stderr
-    run = root / "train"
-    proc = run_cli(
-        "experiment=posemap_train",
-        f"posemap.dataset={ds}",
-        "posemap.epochs=40",
-        "posemap.width=128",
-        "posemap.layers=2",
-        "posemap.dropout=0.0",
-        "posemap.lr=0.003",
-        f"hydra.run.dir={run}",
-    )
-    assert proc.returncode == 0, proc.stderr
-    assert "trained" in proc.stdout
-    return ds, run
 
 
 def test_tiny_training_beats_the_mean_pose(trained: tuple[Path, Path]) -> None:
@@ -344,6 +313,20 @@ def test_motion_run_records_a_landmark_stream_the_drive_can_replay(
     metrics = json.loads((tmp_path / "drive" / "metrics.json").read_text())
     assert metrics["posemap.drive.frames"] == 6  # 1 s of 5 Hz landmark frames
     assert 0 < metrics["posemap.drive.mae_rad"] < 1.0  # against the motion run's joint states
+    # the replay of the motion recording scores the same predictions: one reader, one predictor
+    from simlan_data import replay
+
+    out = tmp_path / "replay"
+    replay.main(
+        [str(tmp_path / "motion"), "--out", str(out), "--algorithms", "posemap", "--set", f"model={run}"]
+    )
+    replayed = json.loads((out / "metrics.json").read_text())
+    assert replayed["replay.posemap.mae_rad"] == pytest.approx(metrics["posemap.drive.mae_rad"], abs=1e-12)
+    assert replayed["replay.posemap.mpjpe_m"] == pytest.approx(metrics["posemap.drive.mpjpe_m"], abs=1e-12)
+    # the drive's own recording is refused: its joint states are the model's output, not truth
+    with pytest.raises(RecordingInputError, match=r"recording is a drive's output in .*drive"):
+        replay.main([str(tmp_path / "drive"), "--out", str(tmp_path / "r2"), "--algorithms", "posemap",
+                     "--set", f"model={run}"])  # fmt: skip
 
 
 # ------------------------------------------------------------------------------------ bad input

@@ -11,7 +11,7 @@ from conftest import compose_config
 from simlan_data import evals
 from simlan_data.config import register_configs
 from simlan_data.errors import ConfigError
-from simlan_data.evaluation.suite import job_name, plan_jobs, write_job_configs
+from simlan_data.evaluation.suite import check_jobs, job_name, plan_jobs, write_job_configs
 from simlan_data.evaluation.suite_spec import load_suite, select_faults, unmet
 
 CASE = {
@@ -56,7 +56,7 @@ def test_the_shipped_suite_file_loads_with_its_pending_entries() -> None:
         "posemap_replay",
     } <= names
     ready = {c.name for c in base.cases if not c.pending}
-    assert {"single_truck", "multi_robot", "default"} <= ready
+    assert {"single_truck", "multi_robot", "default", "posemap_replay"} <= ready
     assert set(base.faults) >= {"bias", "latency", "drop_camera", "calibration", "safety_condition"}
     assert all(
         len(c.seeds) == 3 for c in base.cases if c.family in ("single_truck", "multi_robot", "default")
@@ -173,3 +173,29 @@ def test_a_case_becomes_a_hydra_config_group_option(tmp_path: Path) -> None:
     # a second robot added by config merge (the command line cannot add a typed entry)
     assert cfg.agents.robot_agent_2.type == "jackal"
     assert list(cfg.agents.robot_agent_1.pose) == [-16.0, 0.4, 0.0]
+
+
+def test_faults_act_only_on_the_cases_subject_to_them(tmp_path: Path) -> None:
+    doc = suite_doc()
+    doc["suites"]["s"]["cases"]["d"] = {**CASE, "faults": []}  # e.g. a case without the fault's camera
+    suite = load_suite(write(tmp_path, doc), "s")
+    jobs = plan_jobs(list(suite.cases), tmp_path / "runs")
+    write_job_configs(suite, jobs, tmp_path / "conf", select_faults(suite, ["bias"]))
+    register_configs()
+    search = f"hydra.searchpath=[file://{tmp_path / 'conf'}]"
+    assert list(compose_config(search, "+vv_job=c__s0").localization.bias_m) == [0.05, 0.0]
+    assert list(compose_config(search, "+vv_job=d__s0").localization.bias_m) == [0.0, 0.0]
+    doc["suites"]["s"]["cases"]["d"]["faults"] = ["bais"]
+    with pytest.raises(ConfigError, match=r"unknown fault 'bais' in .*cases.d.faults: faults: bias"):
+        load_suite(write(tmp_path, doc), "s")
+
+
+def test_every_fault_can_be_injected_into_the_whole_base_suite(tmp_path: Path) -> None:
+    """Every case's run config, with every fault that acts on it, composes and validates
+    (e.g. a camera fault never reaches the pose-mapping case, whose cameras are 500-503)."""
+    suite = load_suite(evals.DEFAULT_FILE, "base", seeds=1)
+    faults = select_faults(suite, list(suite.faults))
+    jobs = plan_jobs([c for c in suite.cases if not c.pending], tmp_path / "runs")
+    write_job_configs(suite, jobs, tmp_path / "conf", faults)
+    check_jobs(jobs, tmp_path / "conf", [])
+    assert {j.case.family for j in jobs} >= {"single_truck", "posemap_replay"}

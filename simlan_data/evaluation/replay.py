@@ -102,13 +102,22 @@ class ReplayContext:
 
 ReplayAlgorithm = Callable[[ReplayContext], dict[str, float]]
 REPLAY_ALGORITHMS: dict[str, ReplayAlgorithm] = {}
+# options of an algorithm that name files: a suite file resolves them relative to itself
+PATH_OPTIONS: dict[str, tuple[str, ...]] = {}
 
 
-def register(name: str) -> Callable[[ReplayAlgorithm], ReplayAlgorithm]:
-    """Decorator: make ``fn`` available as ``--algorithms name``."""
+def register(
+    name: str, *, path_options: tuple[str, ...] = ()
+) -> Callable[[ReplayAlgorithm], ReplayAlgorithm]:
+    """Decorator: make ``fn`` available as ``--algorithms name``.
+
+    ``path_options``: its options that are paths (in a suite file, relative to the file, as the
+    cases' recordings; on the command line, relative to the working directory).
+    """
 
     def deco(fn: ReplayAlgorithm) -> ReplayAlgorithm:
         REPLAY_ALGORITHMS[name] = fn
+        PATH_OPTIONS[name] = tuple(path_options)
         return fn
 
     return deco

@@ -3,7 +3,8 @@
 OUT/metrics.parquet|csv   every metric of every case, seed and source (long table)
 OUT/summary.parquet|csv   one row per check: n, mean, 95 % interval, bound, baseline, verdict
 OUT/report.md             summary table, pending checks, per case: checks over seeds,
-                          trajectories over the floor plan, error over time, bird's-eye view;
+                          trajectories over the floor plan, error over time, bird's-eye view,
+                          pose-mapping error over time and per joint;
                           per grid family (a sweep slice): the grid of a metric
 OUT/plots/*.png
 """
@@ -316,6 +317,44 @@ def copy_birdseye(path: Path, jobs: list[Job], out: Path) -> Path | None:
     return None
 
 
+def plot_posemap(path: Path, case: Case, jobs: list[Job], out: Path) -> Path | None:
+    """Pose mapping replayed: joint MAE over time per seed, and the worst joints over all seeds."""
+    from .posemap_replay import FRAMES_FILE, JOINTS_FILE
+
+    found = [
+        (j, out / "replays" / j.name / "posemap")
+        for j in jobs
+        if (out / "replays" / j.name / "posemap" / FRAMES_FILE).is_file()
+    ]
+    if not found:
+        return None
+    fig, (ax_t, ax_j) = plt.subplots(1, 2, figsize=(11, 3.6), gridspec_kw={"width_ratios": [3, 2]})
+    joints = []
+    for k, (job, d) in enumerate(found):
+        frames = pl.read_parquet(d / FRAMES_FILE)
+        ax_t.plot(
+            frames["stamp_ns"].to_numpy() / 1e9,
+            np.degrees(frames["mae_rad"].to_numpy()),
+            lw=1.2 if k == 0 else 0.8,
+            alpha=0.9 if k == 0 else 0.4,
+            label=f"seed {job.seed}",
+        )
+        joints.append(pl.read_parquet(d / JOINTS_FILE))
+    per_joint = pl.concat(joints).group_by("joint").agg(pl.col("mae_deg").mean()).sort("mae_deg").tail(12)
+    ax_j.barh(per_joint["joint"].to_list(), per_joint["mae_deg"].to_list(), color="tab:red", alpha=0.7)
+    ax_j.tick_params(axis="y", labelsize=6)
+    ax_j.set_xlabel("MAE (deg), mean over seeds")
+    ax_j.set_title("worst joints", fontsize=9)
+    ax_t.set_xlabel("simulated time (s)")
+    ax_t.set_ylabel("MAE over 47 joints (deg)")
+    ax_t.set_title(f"{case.name}: predicted vs posed joints per landmark frame", fontsize=9)
+    ax_t.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
 def plot_grid(path: Path, family: str, cases: list[Case], summary: pl.DataFrame) -> Path | None:
     """A sweep slice: the first checked metric's mean over the grid (1-D bars, 2-D heat map)."""
     cells = [c for c in cases if c.family == family and c.grid and not c.pending]
@@ -446,6 +485,9 @@ def write_report(
         for png, title in ((traj, "trajectories"), (err, "error over time")):
             if png is not None:
                 lines += [f"![{title}]({PLOTS_DIR}/{png.name})", ""]
+        pm = plot_posemap(plots / f"{_slug(case.name)}_posemap.png", case, case_jobs, out)
+        if pm is not None:
+            lines += [f"![pose mapping]({PLOTS_DIR}/{pm.name})", ""]
         be = copy_birdseye(plots / f"{_slug(case.name)}_birdseye.png", case_jobs, out)
         if be is not None:
             lines += [

@@ -25,7 +25,10 @@ Layout (every key is checked; a bad one is one error line naming the place)::
             grid: {KEY: [V1, V2]}   # optional: one case per combination, NAME[KEY=V1]
             requires: [...]      # optional; unmet = every check of the case is pending
             pending_note: ...    # what the case waits for (shown with "pending:")
-            replay: {ALGORITHM: {OPTION: VALUE}}      # replays of every recording
+            replay: {ALGORITHM: {OPTION: VALUE}}      # replays of every recording (options that
+                                 # name files, e.g. posemap's model, are relative to this file)
+            faults: [NAME, ...]  # optional: the faults that act on it (default: all; [] = none,
+                                 # e.g. a case without the cameras a fault names)
             metrics: {SOURCE: {METRIC: {max, min, tolerance, rel_tolerance, better}}}
 
 SOURCE is ``run`` (the run's metrics.json) or a replay algorithm of the case. A requirement is
@@ -49,7 +52,7 @@ import yaml
 from ..config import Config
 from ..constants import CONF_DIR
 from ..errors import ConfigError
-from .replay import REPLAY_ALGORITHMS
+from .replay import PATH_OPTIONS, REPLAY_ALGORITHMS
 from .stats import Bound
 
 RUN_SOURCE = "run"
@@ -78,6 +81,11 @@ class Case:
     pending: str = ""  # why it cannot run yet ("" = it can)
     grid: dict[str, Any] = field(default_factory=dict)  # the grid cell this case is (key -> value)
     family: str = ""  # the case name before grid expansion
+    faults: tuple[str, ...] | None = None  # the faults that act on it (None: every one)
+
+    def subject_to(self, faults: list[Fault]) -> list[Fault]:
+        """The injected faults that act on this case."""
+        return [f for f in faults if self.faults is None or f.name in self.faults]
 
 
 @dataclass(frozen=True)
@@ -219,14 +227,21 @@ def _checks(metrics: Any, sources: set[str], where: str) -> tuple[Check, ...]:
     return tuple(out)
 
 
-def _replay(value: Any, where: str) -> dict[str, dict[str, Any]]:
-    return {str(k): _mapping(v, f"{where}.{k}") for k, v in _mapping(value, where).items()}
+def _replay(value: Any, where: str, base: Path) -> dict[str, dict[str, Any]]:
+    """Replay options per algorithm; options that name files are resolved relative to ``base``
+    (the suite file's directory), as the cases' recordings are."""
+    out = {str(k): _mapping(v, f"{where}.{k}") for k, v in _mapping(value, where).items()}
+    for algorithm, options in out.items():
+        for key in PATH_OPTIONS.get(algorithm, ()):
+            if isinstance(options.get(key), str) and options[key]:
+                options[key] = str((base / options[key]).resolve())
+    return out
 
 
-def _fault(name: str, entry: Any, where: str) -> Fault:
+def _fault(name: str, entry: Any, where: str, base: Path) -> Fault:
     e = _mapping(entry, where)
     _known_keys(e, ("description", "run", "replay", "requires", "expect", "pending_note"), where)
-    replay = _replay(e.get("replay"), f"{where}.replay")
+    replay = _replay(e.get("replay"), f"{where}.replay", base)
     if not e.get("run") and not replay:
         raise _err(where, "empty fault", "neither run overrides nor replay options", "give run: or replay:")
     requires = list(_strings(e.get("requires"), f"{where}.requires"))
@@ -253,7 +268,9 @@ def _override_value(value: Any) -> str:
     return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
 
 
-def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: str) -> list[Case]:
+def _cases(
+    name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: str, fault_names: list[str]
+) -> list[Case]:
     e = _mapping(entry, where)
     _known_keys(
         e,
@@ -267,6 +284,7 @@ def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: s
             "pending_note",
             "replay",
             "metrics",
+            "faults",
         ),
         where,
     )
@@ -282,7 +300,7 @@ def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: s
     seeds_n = e.get("seeds", suite.get("seeds", 1))
     if isinstance(seeds_n, bool) or not isinstance(seeds_n, int) or not 1 <= seeds_n <= 1000:
         raise _err(where, f"invalid seeds={seeds_n!r}", "expected an integer within 1..1000", "e.g. seeds: 3")
-    replay = _replay(e.get("replay"), f"{where}.replay")
+    replay = _replay(e.get("replay"), f"{where}.replay", base)
     checks = _checks(e.get("metrics"), {RUN_SOURCE, *replay}, f"{where}.metrics")
     requires = [*_strings(e.get("requires"), f"{where}.requires"), *_implied(overrides, replay)]
     pending = _pending(requires, str(e.get("pending_note", "")))
@@ -293,6 +311,17 @@ def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: s
                 where,
                 f"unknown replay algorithm {unknown[0]!r}",
                 f"known: {', '.join(sorted(REPLAY_ALGORITHMS))}",
+                "fix the name",
+            )
+    subject: tuple[str, ...] | None = None
+    if "faults" in e:
+        subject = _strings(e.get("faults"), f"{where}.faults")
+        unknown = [f for f in subject if f not in fault_names]
+        if unknown:
+            raise _err(
+                f"{where}.faults",
+                f"unknown fault {unknown[0]!r}",
+                f"faults: {', '.join(fault_names) or '(none)'}",
                 "fix the name",
             )
     rec = (base / str(recording)).resolve() if recording is not None else None
@@ -313,6 +342,7 @@ def _cases(name: str, entry: Any, suite: Mapping[str, Any], base: Path, where: s
                 pending,
                 cell,
                 name,
+                subject,
             )
         )
     return out
@@ -340,7 +370,7 @@ def load_suite(path: Path, name: str, *, seeds: int | None = None) -> Suite:
     if name not in suites:
         raise _err(where, f"unknown suite {name!r}", f"suites: {', '.join(suites) or '(none)'}", "pick one")
     faults = {
-        n: _fault(n, f, f"{where}: faults.{n}")
+        n: _fault(n, f, f"{where}: faults.{n}", path.parent)
         for n, f in _mapping(doc.get("faults"), f"{where}: faults").items()
     }
     s = _mapping(suites[name], f"{where}: suites.{name}")
@@ -371,7 +401,9 @@ def load_suite(path: Path, name: str, *, seeds: int | None = None) -> Suite:
         )
     cases: list[Case] = []
     for cname, centry in _mapping(s.get("cases"), f"{where}: suites.{name}.cases").items():
-        cases += _cases(str(cname), centry, s, path.parent, f"{where}: suites.{name}.cases.{cname}")
+        cases += _cases(
+            str(cname), centry, s, path.parent, f"{where}: suites.{name}.cases.{cname}", list(faults)
+        )
     if not cases:
         raise _err(f"{where}: suites.{name}", "no cases", "a suite needs at least one case", "add cases:")
     return Suite(

@@ -16,8 +16,7 @@ drive's input landmarks are published on the same topics (estimator ``replay``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,91 +24,18 @@ from numpy.typing import NDArray
 from ..config import Config
 from ..constants import NS_PER_S
 from ..errors import ConfigError
+from ..evaluation.posemap_inputs import LandmarkStream, load_stream
 from ..geometry.camera import CameraModel
-from ..gpss.posemap.dataset import PARQUET_NAME, read_dataset
 from ..gpss.posemap.estimators import CameraView, ProjectionEstimator
 from ..gpss.posemap.metrics import mpjpe
 from ..gpss.posemap.motion import load_motion
-from ..gpss.posemap.skeleton import JOINT_NAMES, NUM_LANDMARKS
+from ..gpss.posemap.skeleton import JOINT_NAMES
 from ..gpss.posemap.training import TrainedMapper
 from ..recording import messages as M
 from ..recording import schema
-from ..recording.reader import RecordingReader
 from ..recording.writer import RecordingWriter
 from .humanoid import PosedHumanoidAgent
 from .rendering import CameraImages
-
-
-@dataclass
-class LandmarkStream:
-    """Landmark frames (F, C, 33, 4) of some cameras, their stamps and, if known, true joints."""
-
-    stamps_ns: NDArray[np.int64]
-    cameras: list[str]
-    landmarks: NDArray[np.float32]
-    truth: NDArray[np.float64] | None = None
-    sizes: dict[str, tuple[int, int]] = field(default_factory=dict)
-
-
-def stream_from_dataset(path: str, cameras: list[str], period_ns: int) -> LandmarkStream:
-    data = read_dataset(path).select_cameras(cameras)
-    sizes = {str(m["id"]): (int(m["width"]), int(m["height"])) for m in data.meta.get("camera_models", [])}
-    return LandmarkStream(np.arange(len(data)) * period_ns, cameras, data.landmarks, data.joints, sizes)
-
-
-def stream_from_recording(path: str, cameras: list[str], namespace: str) -> LandmarkStream:
-    """Landmark frames of ``cameras`` grouped by stamp; the recorded joint states of ``namespace`` as truth."""
-    topics = {
-        schema.camera_topics(c, rgb="jpeg", depth=None, semantic=None)["pose_landmarks"].name: c
-        for c in cameras
-    }
-    joint_topic = schema.agent_topics(namespace)["joint_states"].name
-    frames: dict[int, dict[str, np.ndarray]] = {}
-    sizes: dict[str, tuple[int, int]] = {}
-    joints: dict[int, np.ndarray] = {}
-    with RecordingReader(path) as bag:
-        missing = [t for t in topics if t not in bag.topics]
-        if missing:
-            raise ConfigError(
-                "recording has no landmarks for the model's cameras",
-                f"posemap.drive={path}",
-                f"missing {', '.join(missing)}",
-                "record with posemap.landmarks_rate_hz > 0 (experiment=posemap_motion) or drive from a dataset",
-            )
-        for m in bag.messages([*topics, joint_topic]):
-            if m.topic == joint_topic:
-                joints[m.stamp_ns] = np.asarray(m.msg.position, dtype=np.float64)
-                continue
-            lm = np.zeros((NUM_LANDMARKS, 4), dtype=np.float32)
-            if m.msg.detected:
-                lm[:] = np.stack([m.msg.x, m.msg.y, m.msg.z, m.msg.visibility], axis=1)
-            frames.setdefault(m.stamp_ns, {})[topics[m.topic]] = lm
-            sizes[topics[m.topic]] = (int(m.msg.width), int(m.msg.height))
-    stamps = sorted(s for s, f in frames.items() if len(f) == len(cameras))
-    if not stamps:
-        raise ConfigError(
-            "no complete landmark frames",
-            f"posemap.drive={path}",
-            "no stamp has landmarks of every camera",
-            "check the recording",
-        )
-    lm_all = np.stack([np.stack([frames[s][c] for c in cameras]) for s in stamps])
-    truth = np.stack([joints[s] for s in stamps]) if all(s in joints for s in stamps) else None
-    return LandmarkStream(np.asarray(stamps, dtype=np.int64), cameras, lm_all, truth, sizes)
-
-
-def load_stream(path: str, cameras: list[str], *, period_ns: int, namespace: str) -> LandmarkStream:
-    p = Path(path)
-    if p.suffix == ".parquet" or (p / PARQUET_NAME).is_file():
-        return stream_from_dataset(path, cameras, period_ns)
-    if p.exists():
-        return stream_from_recording(path, cameras, namespace)
-    raise ConfigError(
-        "landmark source not found",
-        f"posemap.drive={path}",
-        "no such dataset or recording",
-        "give a dataset run directory or a recording",
-    )
 
 
 @dataclass
@@ -151,7 +77,8 @@ def load_drive_inputs(cfg: Config) -> DriveInputs | None:
             pm.drive, mapper.cameras, period_ns=round(NS_PER_S / cfg.cameras.rate_hz), namespace=pm.namespace
         )
         t0 = time.perf_counter()
-        out.predicted = mapper.predict(out.stream.landmarks)
+        # rig features are in the frame of the source's person (where it stood), not the driven one
+        out.predicted = mapper.predict(out.stream.landmarks, position=out.stream.position)
         out.predict_s = time.perf_counter() - t0
     elif pm.motion:
         out.keys = np.stack([load_motion(m) for m in pm.motion])

@@ -226,23 +226,46 @@ def train_from_config(pm: PosemapConfig, run_dir: Path, *, seed: int, config_yam
 
 
 class TrainedMapper:
-    """A saved model ready to map landmarks (C, 33, 4) of its cameras to joint targets."""
+    """A saved model ready to map landmarks (C, 33, 4) of its cameras to joint targets.
 
-    def __init__(self, path: str) -> None:
+    Args:
+        path: a training run directory or its ``model/``.
+        where: how the user named it, for error lines (``posemap.drive_model=...``).
+    Raises:
+        ConfigError: no model there, or one that cannot be read (named, with the cause).
+    """
+
+    def __init__(self, path: str, *, where: str = "") -> None:
+        where = where or f"posemap.drive_model={path}"
         directory = Path(path)
         if (directory / MODEL_DIRNAME / "model.json").is_file():
             directory = directory / MODEL_DIRNAME
         if not (directory / "model.json").is_file():
             raise ConfigError(
                 "model not found",
-                f"posemap.drive_model={path}",
+                where,
                 "no model.json there",
                 "give a training run directory or its model/ (python -m simlan_data.run experiment=posemap_train ...)",
             )
-        self.mapper, self.info = load_mapper(directory)
-        self.spec = self.info["feature_spec"]
-        self.cameras: list[str] = list(self.spec["cameras"])
+        try:
+            self.mapper, self.info = load_mapper(directory)
+            self.spec = self.info["feature_spec"]
+            self.cameras: list[str] = [str(c) for c in self.spec["cameras"]]
+        except Exception as err:  # json, torch, pickle and missing keys all mean the same to a user
+            first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+            raise ConfigError(
+                "model unreadable",
+                where,
+                f"{type(err).__name__}: {first}"[:300],
+                "retrain it (python -m simlan_data.run experiment=posemap_train ...) or restore its files",
+            ) from err
+        self.directory = directory
 
-    def predict(self, landmarks: np.ndarray) -> np.ndarray:
-        """Joint targets (N, 47) of landmarks (N, C, 33, 4) in ``self.cameras`` order."""
-        return self.mapper.predict(features_for(np.asarray(landmarks, dtype=np.float32), self.spec))
+    def predict(self, landmarks: np.ndarray, *, position: list[float] | None = None) -> np.ndarray:
+        """Joint targets (N, 47) of landmarks (N, C, 33, 4) in ``self.cameras`` order.
+
+        ``position``: where the support base stands (x, y, yaw) if not where the model was
+        trained (rig features are expressed in the base's frame; other features ignore it).
+        """
+        spec = self.spec if position is None else {**self.spec, "position": list(position)}
+        return self.mapper.predict(features_for(np.asarray(landmarks, dtype=np.float32), spec))

@@ -1,0 +1,243 @@
+"""Replay a recording's landmark stream through a trained pose mapper: ``--algorithms posemap``.
+
+    python -m simlan_data.replay RECORDING --out DIR --algorithms posemap --set model=TRAIN_RUN
+
+Data flow::
+
+    /camera_<id>/pose_landmarks of the model's cameras --> frames (F, C, 33, 4) by stamp
+        (position: where the person's support base stood, from /ground_truth/poses)
+        --> TrainedMapper (features + MLP / boosting) --> predicted joints (F, 47)
+    /<ns>/joint_states at the same stamps (the targets the humanoid was posed with) = truth
+        --> replay.posemap.* metrics (gpss/posemap/metrics.py), posemap_joints.parquet (per
+            joint), posemap_frames.parquet (per frame: errors, predicted and true joints)
+
+Options (``--set KEY=VALUE``; in a suite, ``replay: {posemap: {...}}``):
+
+- ``model`` (required): a training run directory or its ``model/``;
+- ``namespace``: the posed humanoid (default: the recording's ``posemap.namespace``);
+- ``position``: ``recorded`` (default: the humanoid's recorded base pose), ``model`` (where the
+  training data's humanoid stood) or ``[x, y, yaw]``.
+
+The model's cameras must be recorded with landmarks and calibrated as the model was trained
+(centre within 5 cm, orientation within 1 degree, normalised intrinsics within 1 %).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import polars as pl
+from scipy.spatial.transform import Rotation
+
+from ..errors import ConfigError, RecordingInputError
+from ..geometry.camera import CameraModel
+from ..gpss.posemap.metrics import joint_errors, mpjpe, per_joint
+from ..gpss.posemap.skeleton import JOINT_NAMES, NUM_JOINTS, landmark_positions
+from ..gpss.posemap.training import TrainedMapper
+from .posemap_inputs import base_pose, landmark_cameras, read_landmark_stream
+from .replay import ReplayContext, register
+
+PREFIX = "replay.posemap"
+OPTIONS = ("model", "namespace", "position")
+JOINTS_FILE = "posemap_joints.parquet"
+FRAMES_FILE = "posemap_frames.parquet"
+MAX_CENTRE_M = 0.05
+MAX_ANGLE_DEG = 1.0
+MAX_INTRINSICS_REL = 0.01
+
+
+def _options(ctx: ReplayContext) -> dict[str, Any]:
+    unknown = sorted(set(ctx.options) - set(OPTIONS))
+    if unknown:
+        raise ConfigError(
+            f"unknown posemap replay option {unknown[0]!r}",
+            "--set",
+            f"known: {', '.join(OPTIONS)}",
+            "fix the spelling",
+        )
+    model = ctx.options.get("model")
+    if not isinstance(model, str) or not model:
+        raise ConfigError(
+            "posemap replay needs a model",
+            "--set model=...",
+            "no trained pose mapper given",
+            "give a training run directory: --set model=<run>/model (python -m simlan_data.run experiment=posemap_train ...)",
+        )
+    return dict(ctx.options)
+
+
+def _normalised_intrinsics(cam: CameraModel) -> np.ndarray:
+    K = cam.K
+    return np.array(
+        [K[0, 0] / cam.width, K[1, 1] / cam.height, (K[0, 2] + 0.5) / cam.width, (K[1, 2] + 0.5) / cam.height]
+    )
+
+
+def camera_mismatch(trained: dict[str, Any], recorded: CameraModel) -> str:
+    """Why camera ``recorded`` is not the camera a model was trained with ("" if it is)."""
+    world_from_camera = np.asarray(trained["world_from_camera"], dtype=np.float64)
+    moved = float(np.linalg.norm(world_from_camera[:3, 3] - recorded.position))
+    if moved > MAX_CENTRE_M:
+        return f"camera {recorded.camera_id} stands {moved:.3f} m from where the model's stood"
+    relative = world_from_camera[:3, :3].T @ recorded.world_from_camera.rotation
+    turned = float(np.degrees(Rotation.from_matrix(relative).magnitude()))
+    if turned > MAX_ANGLE_DEG:
+        return f"camera {recorded.camera_id} is turned {turned:.2f} degrees from the model's"
+    w, h = int(trained["width"]), int(trained["height"])
+    K = np.asarray(trained["K"], dtype=np.float64)
+    theirs = np.array([K[0, 0] / w, K[1, 1] / h, (K[0, 2] + 0.5) / w, (K[1, 2] + 0.5) / h])
+    rel = float(np.max(np.abs(_normalised_intrinsics(recorded) - theirs) / np.abs(theirs)))
+    if rel > MAX_INTRINSICS_REL:
+        return f"camera {recorded.camera_id}'s intrinsics differ from the model's by {100 * rel:.1f} %"
+    return ""
+
+
+def check_cameras(mapper: TrainedMapper, ctx: ReplayContext, where: str) -> None:
+    """The recording has landmarks of every camera the model reads, calibrated as in training.
+
+    Raises:
+        RecordingInputError: no landmark topics at all.
+        ConfigError: the model reads other cameras, or the same ids placed or calibrated otherwise.
+    """
+    have = landmark_cameras(ctx.reader)
+    if not have:
+        raise RecordingInputError(
+            "recording has no landmark topics",
+            str(ctx.reader.path),
+            "no /camera_<id>/pose_landmarks: nothing for a pose mapper to read",
+            "record with posemap.landmarks_rate_hz > 0 (experiment=posemap_motion)",
+        )
+    missing = [c for c in mapper.cameras if c not in have]
+    if missing:
+        raise ConfigError(
+            "model's cameras do not match the recording's",
+            where,
+            f"the model reads cameras {', '.join(mapper.cameras)}; the recording has landmarks of {', '.join(have)}",
+            "give a model trained on the recording's cameras (posemap.cameras=[...])",
+        )
+    trained = {str(m["id"]): m for m in mapper.spec.get("camera_models", [])}
+    recorded = ctx.cameras
+    for cid in mapper.cameras:
+        if cid not in trained:  # image features: the model keeps no calibration to compare
+            continue
+        if cid not in recorded:
+            raise RecordingInputError(
+                f"camera {cid} has no calibration in the recording",
+                str(ctx.reader.path),
+                "no camera_info or /tf_static entry",
+                "record with simlan_data",
+            )
+        why = camera_mismatch(trained[cid], recorded[cid])
+        if why:
+            raise ConfigError(
+                "model's cameras do not match the recording's",
+                where,
+                why,
+                "give a model trained on a dataset of the recording's cameras (experiment=posemap_dataset)",
+            )
+
+
+def _position(option: Any, ctx: ReplayContext, namespace: str, mapper: TrainedMapper) -> list[float]:
+    if option in (None, "recorded"):
+        pose = base_pose(ctx.reader, namespace)
+        if pose is None:
+            raise RecordingInputError(
+                f"no ground truth of {namespace}",
+                str(ctx.reader.path),
+                "the posed humanoid's base pose is unknown",
+                "give --set namespace=<the posed humanoid> or --set position=model",
+            )
+        return list(pose)
+    if option == "model":
+        return [float(v) for v in mapper.spec.get("position", [0.0, 0.0, 0.0])]
+    if isinstance(option, list) and len(option) == 3 and all(isinstance(v, (int, float)) for v in option):
+        return [float(v) for v in option]
+    raise ConfigError(
+        f"invalid posemap replay option position={option!r}",
+        "--set",
+        "expected recorded, model or [x_m, y_m, yaw_rad]",
+        "e.g. --set position=recorded",
+    )
+
+
+def _frames_table(stamps: np.ndarray, pred: np.ndarray, truth: np.ndarray) -> pl.DataFrame:
+    err = np.abs(pred - truth)
+    dist = np.linalg.norm(landmark_positions(pred) - landmark_positions(truth), axis=2)
+    return pl.DataFrame(
+        {
+            "stamp_ns": stamps.astype(np.int64),
+            "mae_rad": err.mean(axis=1),
+            "mpjpe_m": dist.mean(axis=1),
+            "predicted_rad": pred,
+            "truth_rad": truth,
+        },
+        schema={
+            "stamp_ns": pl.Int64,
+            "mae_rad": pl.Float64,
+            "mpjpe_m": pl.Float64,
+            "predicted_rad": pl.Array(pl.Float64, NUM_JOINTS),
+            "truth_rad": pl.Array(pl.Float64, NUM_JOINTS),
+        },
+    )
+
+
+def _joints_table(pred: np.ndarray, truth: np.ndarray, mean_pose: np.ndarray) -> pl.DataFrame:
+    ours = per_joint(pred, truth, prefix="j")
+    baseline = per_joint(np.broadcast_to(mean_pose, truth.shape), truth, prefix="j")
+    return pl.DataFrame(
+        {
+            "joint": list(JOINT_NAMES),
+            "mae_rad": [ours[f"j.{n}.mae_rad"] for n in JOINT_NAMES],
+            "mae_deg": [ours[f"j.{n}.mae_deg"] for n in JOINT_NAMES],
+            "mse_rad2": [ours[f"j.{n}.mse_rad2"] for n in JOINT_NAMES],
+            "mean_pose_mae_rad": [baseline[f"j.{n}.mae_rad"] for n in JOINT_NAMES],
+        }
+    )
+
+
+@register("posemap", path_options=("model",))
+def posemap(ctx: ReplayContext) -> dict[str, float]:
+    """Predict the posed humanoid's joints from the recorded landmarks; score against its targets."""
+    options = _options(ctx)
+    where = f"posemap replay option model={options['model']}"
+    mapper = TrainedMapper(options["model"], where=where)
+    check_cameras(mapper, ctx, where)
+    namespace = str(options.get("namespace") or (ctx.config.get("posemap") or {}).get("namespace") or "")
+    if not namespace:
+        namespace = "robot_agent_1"
+    stream = read_landmark_stream(ctx.reader, mapper.cameras, namespace, where=str(ctx.reader.path))
+    if stream.estimators == ("replay",):
+        raise RecordingInputError(
+            "recording is a drive's output",
+            str(ctx.reader.path),
+            "its joint states are a model's predictions, not the targets the landmarks were made from",
+            "replay the drive's landmark source (e.g. an experiment=posemap_motion recording)",
+        )
+    if stream.truth is None or stream.truth.shape[1] != NUM_JOINTS:
+        raise RecordingInputError(
+            f"recording lacks the joint states of {namespace}",
+            str(ctx.reader.path),
+            "no /<ns>/joint_states of 47 joints at every landmark stamp: the truth is unknown",
+            "give --set namespace=<the posed humanoid> or record with experiment=posemap_motion",
+        )
+    position = _position(options.get("position"), ctx, namespace, mapper)
+    t0 = time.perf_counter()
+    pred = mapper.predict(stream.landmarks, position=position)
+    predict_s = time.perf_counter() - t0
+    truth = stream.truth
+    mean_pose = np.asarray(mapper.mapper.y_norm.mean if mapper.mapper.y_norm is not None else truth.mean(0))
+    metrics = joint_errors(pred, truth, prefix=PREFIX)
+    metrics[f"{PREFIX}.mpjpe_m"], metrics[f"{PREFIX}.mpjpe_body_m"] = mpjpe(pred, truth)
+    baseline = np.broadcast_to(mean_pose, truth.shape).copy()
+    metrics[f"{PREFIX}.baseline.mean_pose.mae_rad"] = float(np.abs(baseline - truth).mean())
+    metrics[f"{PREFIX}.baseline.mean_pose.mpjpe_m"], _ = mpjpe(baseline, truth)
+    metrics[f"{PREFIX}.frames"] = float(len(pred))
+    metrics[f"{PREFIX}.predict_ms_per_frame"] = 1e3 * predict_s / max(1, len(pred))
+    metrics[f"{PREFIX}.visible_fraction"] = float((stream.landmarks[..., 3] > 0.5).mean())
+    trained_at = np.asarray(mapper.spec.get("position", position)[:2], dtype=np.float64)
+    metrics[f"{PREFIX}.base_offset_m"] = float(np.linalg.norm(np.asarray(position[:2]) - trained_at))
+    _joints_table(pred, truth, mean_pose).write_parquet(ctx.out_dir / JOINTS_FILE)
+    _frames_table(stream.stamps_ns, pred, truth).write_parquet(ctx.out_dir / FRAMES_FILE)
+    return metrics
