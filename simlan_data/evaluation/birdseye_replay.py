@@ -40,7 +40,7 @@ from ..recording.reader import Message
 from ..world.layout import load_layout
 from .birdseye_metrics import FULL, QualityEvaluator, ground_control_points, stitcher_projections
 from .faults import CAMERA_FAULT_OPTIONS
-from .replay import ReplayContext, register
+from .replay import ReplayContext, check_options, register
 
 REPORT_MD = "birdseye_report.md"
 REPORT_PNG = "birdseye_report.png"
@@ -60,14 +60,7 @@ def _decode(m: Message) -> NDArray[np.uint8]:
 
 def birdseye_settings(ctx: ReplayContext) -> tuple[BirdseyeConfig, int, bool]:
     """The canvas config (recording's section, then --set options) and evaluation options."""
-    unknown = sorted(set(ctx.options) - set(OPTIONS))
-    if unknown:
-        raise ConfigError(
-            f"unknown birdseye option {unknown[0]!r}",
-            "replay --set",
-            f"known: {', '.join(OPTIONS)}",
-            "e.g. --set px_per_m=25",
-        )
+    check_options(ctx.options, OPTIONS, "birdseye", "replay --set", "e.g. --set px_per_m=25")
     recorded = dict(ctx.config.get("birdseye") or {})
     merged = {**{k: v for k, v in recorded.items() if k in BirdseyeConfig.__dataclass_fields__}}
     merged.update({k: ctx.options[k] for k in CANVAS_OPTIONS if k in ctx.options})

@@ -37,7 +37,7 @@ from ..gpss.posemap.metrics import joint_errors, mpjpe, per_joint
 from ..gpss.posemap.skeleton import JOINT_NAMES, NUM_JOINTS, landmark_positions
 from ..gpss.posemap.training import TrainedMapper
 from .posemap_inputs import base_pose, landmark_cameras, read_landmark_stream
-from .replay import ReplayContext, register
+from .replay import ReplayContext, check_options, register
 
 PREFIX = "replay.posemap"
 OPTIONS = ("model", "namespace", "position")
@@ -49,14 +49,7 @@ MAX_INTRINSICS_REL = 0.01
 
 
 def _options(ctx: ReplayContext) -> dict[str, Any]:
-    unknown = sorted(set(ctx.options) - set(OPTIONS))
-    if unknown:
-        raise ConfigError(
-            f"unknown posemap replay option {unknown[0]!r}",
-            "--set",
-            f"known: {', '.join(OPTIONS)}",
-            "fix the spelling",
-        )
+    check_options(ctx.options, OPTIONS, "posemap replay", "--set", "fix the spelling")
     model = ctx.options.get("model")
     if not isinstance(model, str) or not model:
         raise ConfigError(

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..errors import RecordingInputError
+from ..errors import ConfigError, RecordingInputError
 from ..geometry.camera import CameraModel
 from ..geometry.transforms import Transform
 from ..recording import schema
@@ -104,6 +104,15 @@ ReplayAlgorithm = Callable[[ReplayContext], dict[str, float]]
 REPLAY_ALGORITHMS: dict[str, ReplayAlgorithm] = {}
 # options of an algorithm that name files: a suite file resolves them relative to itself
 PATH_OPTIONS: dict[str, tuple[str, ...]] = {}
+
+
+def check_options(
+    options: dict[str, Any], known: tuple[str, ...] | list[str], what: str, where: str, fix: str
+) -> None:
+    """Refuse an unknown ``--set`` option of a replay algorithm with one line naming the known ones."""
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise ConfigError(f"unknown {what} option {unknown[0]!r}", where, f"known: {', '.join(known)}", fix)
 
 
 def register(
