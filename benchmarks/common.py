@@ -54,12 +54,13 @@ def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
 
 
 def run_cli(
-    *args: str, timeout: float = 3600, module: str = "simlan_data.run"
+    *args: str, timeout: float = 3600, module: str = "simlan_data.run", prefix: Sequence[str] = ()
 ) -> subprocess.CompletedProcess[str]:
+    """``python -m module args`` from the repository (``prefix``: e.g. a taskset command)."""
     env = {**os.environ}
     env.pop("HYDRA_FULL_ERROR", None)
     return subprocess.run(
-        [sys.executable, "-m", module, *args],
+        [*prefix, sys.executable, "-m", module, *args],
         capture_output=True,
         text=True,
         cwd=REPO,

@@ -20,33 +20,26 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import REPO, machine, run_cli, table
+from common import machine, run_cli, table
 
 
 def replay(recording: Path, out: Path, method: str) -> dict[str, float]:
-    env = {**os.environ}
-    env.pop("HYDRA_FULL_ERROR", None)
-    cmd = [
-        sys.executable,
-        "-m",
-        "simlan_data.replay",
+    pin = ["taskset", "-c", "0"] if shutil.which("taskset") else []
+    proc = run_cli(
         str(recording),
         "--out",
         str(out),
         "--set",
         f"method={method}",
-    ]
-    if shutil.which("taskset"):
-        cmd = ["taskset", "-c", "0", *cmd]
-    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, env=env, check=False)
+        module="simlan_data.replay",
+        prefix=pin,
+    )
     if proc.returncode != 0:
         raise SystemExit(f"replay of {recording} failed: {proc.stderr.strip()}")
     metrics = json.loads((out / "metrics.json").read_text())

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -31,7 +30,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import REPO, machine, run_cli, table
+from common import machine, run_cli, table
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.replay import ReplayContext
 from simlan_data.evaluation.safety_inputs import read_safety_recording
@@ -73,21 +72,9 @@ def run(out: Path, name: str, *overrides: str) -> dict[str, float]:
 
 def replay(recording: Path, out: Path, *sets: str) -> dict[str, float]:
     if not (out / "metrics.json").is_file():
-        env = {**os.environ}
-        env.pop("HYDRA_FULL_ERROR", None)
-        cmd = [
-            sys.executable,
-            "-m",
-            "simlan_data.replay",
-            str(recording),
-            "--out",
-            str(out),
-            "--algorithms",
-            "safety",
-        ]
-        for s in sets:
-            cmd += ["--set", s]
-        proc = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, env=env, check=False)
+        options = [a for s in sets for a in ("--set", s)]
+        args = [str(recording), "--out", str(out), "--algorithms", "safety", *options]
+        proc = run_cli(*args, module="simlan_data.replay")
         if proc.returncode != 0:
             raise SystemExit(f"replay of {recording} failed: {proc.stderr.strip()}")
     return json.loads((out / "metrics.json").read_text())
