@@ -11,7 +11,9 @@ does what is missing):
    dataset's first samples); generation speed of both occlusion modes on 200 samples;
 2. models on each: our re-implementation of SIMLAN's single-camera MLP (camera 500, x, y, z,
    hidden [504, 476, 479]), gradient boosting on one camera (AutoGluon's stand-in), and the
-   multi-view fusion MLP on cameras 500-503;
+   multi-view fusion MLP on cameras 500-503, alone and followed by the kinematic fit
+   (``posemap.refine=fit``); the fit's information bound (started from and pulled towards the
+   true joints: what no estimate from these landmarks can beat by much);
 3. prints markdown for BENCHMARKS.md (SIMLAN's reported 0.2465 rad AutoGluon and 0.359 rad MLP
    beside ours) and the raw JSON. Accuracy figures do not depend on load; timed ones do.
 """
@@ -24,19 +26,36 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # this checkout's simlan_data
 from common import REPO, machine, run_cli, table
 from simlan_data.gpss.posemap.ambiguity import ambiguity_floor
 from simlan_data.gpss.posemap.dataset import read_dataset, split_of
+from simlan_data.gpss.posemap.fit import Refiner
 from simlan_data.gpss.posemap.metrics import evaluate
-from simlan_data.gpss.posemap.training import TrainedMapper
+from simlan_data.gpss.posemap.training import TrainedMapper, rig_of
 
 SIMLAN = {"autogluon": 0.2465, "mlp": 0.359}
+FUSION = [
+    "posemap.model=fusion",
+    "posemap.epochs=60",
+    "posemap.batch_size=512",
+    "posemap.hidden=[256,256]",
+    "posemap.dropout=0.0",
+    "posemap.lr=0.003",
+]
 MODELS = {
     # name: (overrides, what); the same epochs and batch for both MLPs
     "simlan_mlp": (
-        ["posemap.model=mlp", "posemap.cameras=[500]", "posemap.epochs=12", "posemap.batch_size=512"],
+        [
+            "posemap.model=mlp",
+            "posemap.cameras=[500]",
+            "posemap.epochs=12",
+            "posemap.batch_size=512",
+            "posemap.refine=none",
+        ],
         "SIMLAN's MLP re-implemented: camera 500, x, y, z, [504, 476, 479], dropout 0.1, Adam, MSE",
     ),
     "gbm_1cam": (
@@ -47,20 +66,17 @@ MODELS = {
             "posemap.gbm_iterations=100",
             "posemap.loss=mse",
             "posemap.threads=1",
+            "posemap.refine=none",
         ],
         "gradient boosting per joint, camera 500 (AutoGluon's stand-in)",
     ),
     "fusion": (
-        [
-            "posemap.model=fusion",
-            "posemap.epochs=12",
-            "posemap.batch_size=512",
-            "posemap.width=512",
-            "posemap.layers=3",
-            "posemap.dropout=0.0",
-            "posemap.weight_decay=0.00001",
-        ],
-        "multi-view fusion MLP (L1), cameras 500-503, rig features, 3 x 512",
+        [*FUSION, "posemap.refine=none"],
+        "multi-view fusion MLP (L1), cameras 500-503, rig features, 2 x 256, learned alone",
+    ),
+    "fusion_fit": (
+        [*FUSION, "posemap.refine=fit"],
+        "the same fusion MLP + kinematic fit to all 4 cameras (posemap.refine=fit)",
     ),
 }
 
@@ -113,6 +129,20 @@ def transfer(model_run: Path, dataset_dir: Path) -> dict:
     return out
 
 
+def fit_bound(model_run: Path, dataset_dir: Path, n: int = 2000) -> dict:
+    """The fit with the truth as its start and prior (the learned model's per-joint sigma): how
+    far the landmarks alone leave the joints, i.e. roughly the best any estimate can do here."""
+    mapper = TrainedMapper(str(model_run))
+    data = read_dataset(str(dataset_dir)).select_cameras(mapper.cameras)
+    info = mapper.info["split"]
+    split = split_of(data.sample_ids, val_fraction=info["val_fraction"], test_fraction=info["test_fraction"])
+    te = np.flatnonzero(split == "test")[:n]
+    refiner = Refiner.from_dict(mapper.info["refine"], rig_of(mapper.spec))
+    y = data.joints[te]
+    q = refiner(data.landmarks[te], y)
+    return {"posemap.mae_rad": float(np.abs(q - y).mean()), "samples": len(te)}
+
+
 def worst_joints(m: dict, n: int = 5) -> str:
     joints = sorted(
         (k for k in m if k.startswith("posemap.joint.") and k.endswith(".mae_rad")), key=lambda k: -m[k]
@@ -162,13 +192,14 @@ def main() -> int:
     if "mediapipe" in data:
         results["mediapipe (model trained on projection)"] = {
             name: transfer(args.workdir / f"projection__{name}", args.workdir / "mediapipe")
-            for name in ("simlan_mlp", "fusion")
+            for name in ("simlan_mlp", "fusion", "fusion_fit")
         }
     raw["results"] = {
         d: {n: {k: v for k, v in m.items() if ".joint." not in k} for n, m in r.items()}
         for d, r in results.items()
     }
     raw["worst_joints"] = {d: {n: worst_joints(m) for n, m in r.items()} for d, r in results.items()}
+    raw["fit_bound"] = fit_bound(args.workdir / "projection__fusion_fit", args.workdir / "projection")
     floor = ambiguity_floor()
     raw["ambiguity_floor"] = floor
     raw["ambiguity_floor_mae_rad"] = sum(floor.values()) / 47
@@ -258,6 +289,10 @@ def main() -> int:
         f"i.e. {raw['ambiguity_floor_mae_rad']:.4f} rad on the 47-joint mean; per joint: "
         + ", ".join(f"{k} {v:.3f}" for k, v in floor.items())
         + "\n"
+    )
+    print(
+        f"Information bound: the same fit started from and pulled towards the true joints gives "
+        f"{raw['fit_bound']['posemap.mae_rad']:.4f} rad on {raw['fit_bound']['samples']} test samples.\n"
     )
     for d, r in raw["worst_joints"].items():
         for name, text in r.items():

@@ -17,6 +17,7 @@ OCCLUSIONS = ("depth", "rays")
 MODELS = ("mlp", "fusion", "gbm")
 FEATURES = ("image", "rig")
 LOSSES = ("auto", "mse", "l1")
+REFINES = ("none", "fit")
 
 
 def _bad(key: str, value: Any, why: str, fix: str) -> ConfigError:
@@ -59,6 +60,11 @@ class PosemapConfig:
     test_fraction: float = 0.15
     gbm_iterations: int = 300
     threads: int = 2
+    # fit the skeleton to every camera's landmarks, starting from the learned estimate
+    # (gpss/posemap/fit.py): none | fit
+    refine: str = "none"
+    refine_iterations: int = 15
+    refine_starts: int = 8  # 1 + random restarts of the arms where the fit stays far off
     # --- drive (a simulation run whose humanoid follows a landmark stream through a trained model)
     drive: str = ""  # landmark source: dataset (dir or parquet) or a recording with landmark topics
     drive_model: str = ""  # a trained model directory (train run directory or its model/)
@@ -89,6 +95,12 @@ class PosemapConfig:
             raise _bad("model", self.model, f"expected one of {', '.join(MODELS)}", "use fusion")
         if self.loss not in LOSSES:
             raise _bad("loss", self.loss, f"expected one of {', '.join(LOSSES)}", "use auto")
+        if self.refine not in REFINES:
+            raise _bad("refine", self.refine, f"expected one of {', '.join(REFINES)}", "use fit (or none)")
+        if not 1 <= self.refine_iterations <= 1000:
+            raise _bad("refine_iterations", self.refine_iterations, "must be within 1..1000", "use 15")
+        if not 1 <= self.refine_starts <= 100:
+            raise _bad("refine_starts", self.refine_starts, "must be within 1..100", "use 8")
         if self.features not in FEATURES:
             raise _bad("features", self.features, f"expected one of {', '.join(FEATURES)}", "use rig")
         if not 0 <= self.samples <= 10_000_000:

@@ -44,30 +44,69 @@ def ambiguous_groups() -> list[tuple[list[str], bool]]:
     return out
 
 
+def _curve(a: NDArray[np.float64], values: NDArray[np.float64], leg: bool) -> NDArray[np.float64]:
+    """Configurations (N, G, 4) with the same landmarks as group angles ``a`` (N, 4), per free value."""
+    n, g = len(a), len(values)
+    G = Rotation.from_euler("Z" if leg else "Y", -values[:, None]).as_matrix()  # (G, 3, 3)
+    if leg:
+        R = Rotation.from_euler("Z", a[:, :1]).as_matrix() @ Rotation.from_euler("XYZ", a[:, 1:]).as_matrix()
+        M = G[None] @ R[:, None]
+    else:
+        R = Rotation.from_euler("XYZ", a[:, :3]).as_matrix() @ Rotation.from_euler("Y", a[:, 3:]).as_matrix()
+        M = R[:, None] @ G[None]
+    euler = Rotation.from_matrix(M.reshape(-1, 3, 3)).as_euler("XYZ").reshape(n, g, 3)
+    free = np.broadcast_to(values[None, :, None], (n, g, 1))
+    return np.concatenate([free, euler], axis=2) if leg else np.concatenate([euler, free], axis=2)
+
+
+def _weighted_median(values: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per row and column of ``values`` (N, G, K), the median along G under ``weights`` (N, G)."""
+    order = np.argsort(values, axis=1)
+    v = np.take_along_axis(values, order, axis=1)
+    w = np.take_along_axis(np.broadcast_to(weights[..., None], values.shape), order, axis=1)
+    cum = np.cumsum(w, axis=1)
+    half = 0.5 * cum[:, -1:, :]
+    pick = np.argmax(cum >= half, axis=1)  # (N, K): first sample reaching half the weight
+    return np.take_along_axis(v, pick[:, None, :], axis=1)[:, 0, :]
+
+
+def curve_medians(
+    q: NDArray[np.float64], *, limit_scale: float = 0.8, grid: int = 401, chunk: int = 256
+) -> NDArray[np.float64]:
+    """``q`` (N, 47) with each ambiguous group replaced by its per-joint median along its curve.
+
+    The curve through ``q`` (configurations with identical landmarks, within ``limit_scale`` x
+    the limits) is sampled uniformly in its free angle; a group whose curve leaves no sample in
+    the limits keeps its angles.
+    """
+    q = np.array(q, dtype=np.float64, copy=True)
+    lo, hi = limit_scale * LOWER, limit_scale * UPPER
+    index = {name: i for i, name in enumerate(JOINT_NAMES)}
+    for names, leg in ambiguous_groups():
+        idx = [index[nm] for nm in names]
+        free = idx[0] if leg else idx[3]
+        values = np.linspace(lo[free], hi[free], grid)
+        for s in range(0, len(q), chunk):
+            cand = _curve(q[s : s + chunk, idx], values, leg)
+            ok = np.all((cand >= lo[idx] - 1e-9) & (cand <= hi[idx] + 1e-9), axis=2)
+            has = ok.any(axis=1)
+            med = _weighted_median(
+                cand[has], (ok / np.maximum(np.abs(np.cos(cand[..., 2 if leg else 1])), 1e-6))[has]
+            )
+            block = q[s : s + chunk]
+            rows = block[has]
+            rows[:, idx] = med
+            block[has] = rows
+    return q
+
+
 def ambiguity_floor(
     n: int = 600, *, limit_scale: float = 0.8, grid: int = 801, seed: int = 0
 ) -> dict[str, float]:
     """Per-joint MAE (rad) of the best estimate from perfect landmarks, for the ambiguous joints."""
     q = sample_joints(np.random.default_rng(seed), n, limit_scale=limit_scale)
-    lo, hi = limit_scale * LOWER, limit_scale * UPPER
-    index = {name: i for i, name in enumerate(JOINT_NAMES)}
-    out: dict[str, float] = {}
-    for names, leg in ambiguous_groups():
-        idx = [index[nm] for nm in names]
-        free = idx[0] if leg else idx[3]
-        values = np.linspace(lo[free], hi[free], grid)
-        G = Rotation.from_euler("Z" if leg else "Y", -values[:, None]).as_matrix()
-        errors = np.zeros((n, 4))
-        for s in range(n):
-            a = q[s, idx]
-            cand: NDArray[np.float64]
-            if leg:
-                R = Rotation.from_euler("Z", a[0]).as_matrix() @ Rotation.from_euler("XYZ", a[1:]).as_matrix()
-                cand = np.c_[values, Rotation.from_matrix(G @ R).as_euler("XYZ")]
-            else:
-                R = Rotation.from_euler("XYZ", a[:3]).as_matrix() @ Rotation.from_euler("Y", a[3]).as_matrix()
-                cand = np.c_[Rotation.from_matrix(R @ G).as_euler("XYZ"), values]
-            ok = np.all((cand >= lo[idx] - 1e-9) & (cand <= hi[idx] + 1e-9), axis=1)
-            errors[s] = np.abs(np.median(cand[ok], axis=0) - a)
-        out.update({nm: float(e) for nm, e in zip(names, errors.mean(axis=0))})
-    return out
+    best = curve_medians(q, limit_scale=limit_scale, grid=grid)
+    names = [nm for group, _ in ambiguous_groups() for nm in group]
+    idx = [JOINT_NAMES.index(nm) for nm in names]
+    errors = np.abs(best[:, idx] - q[:, idx]).mean(axis=0)
+    return {nm: float(e) for nm, e in zip(names, errors)}

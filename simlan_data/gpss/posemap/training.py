@@ -24,6 +24,7 @@ from ...errors import ConfigError
 from ...posemap_config import PosemapConfig
 from .dataset import PoseDataset, read_dataset, split_of
 from .features import Rig, build_features
+from .fit import FitParams, Refiner
 from .metrics import evaluate
 from .models import MAPPERS, PoseMapper, TrainParams, load_mapper
 from .skeleton import JOINT_NAMES
@@ -50,28 +51,44 @@ def feature_spec(pm: PosemapConfig, data: PoseDataset) -> dict[str, Any]:
     else:
         kind = pm.features
     spec: dict[str, Any] = {"cameras": [str(c) for c in cameras], "features": kind}
-    if kind == "rig":
+    if kind == "rig" or pm.refine != "none":
         models = data.meta.get("camera_models")
         if not models:
             raise ConfigError(
                 "dataset lacks camera models",
                 "dataset.json",
-                "rig features need the cameras' calibrations",
-                "regenerate the dataset or use posemap.features=image",
+                "rig features and posemap.refine need the cameras' calibrations",
+                "regenerate the dataset or use posemap.features=image posemap.refine=none",
             )
         spec["camera_models"] = [m for m in models if str(m["id"]) in spec["cameras"]]
         spec["position"] = data.meta.get("position", [5.3, -10.0, 0.0])
     return spec
 
 
+def rig_of(spec: dict[str, Any]) -> Rig:
+    return Rig.from_meta(spec["camera_models"], spec["cameras"], spec["position"])
+
+
 def features_for(landmarks: np.ndarray, spec: dict[str, Any]) -> np.ndarray:
     """Model inputs of landmarks (N, C, 33, 4) in the spec's camera order."""
-    rig = (
-        Rig.from_meta(spec["camera_models"], spec["cameras"], spec["position"])
-        if spec["features"] == "rig"
-        else None
+    return build_features(landmarks, spec["features"], rig_of(spec) if spec["features"] == "rig" else None)
+
+
+def make_refiner(
+    pm: PosemapConfig, data: PoseDataset, spec: dict[str, Any], residuals: np.ndarray, seed: int
+) -> Refiner:
+    """The kinematic fit after the learned model; it trusts the model per joint as far as the
+    model's own held-out errors ``residuals`` (N, 47) say, and the landmarks as far as the
+    estimator's noise (from the dataset) says."""
+    params = FitParams(
+        noise_px=float(data.meta.get("noise_px", pm.noise_px)),
+        hidden_noise_px=float(data.meta.get("hidden_noise_px", pm.hidden_noise_px)),
+        iterations=pm.refine_iterations,
+        starts=pm.refine_starts,
+        limit_scale=float(data.meta.get("limit_scale", pm.limit_scale)),
+        seed=seed,
     )
-    return build_features(landmarks, spec["features"], rig)
+    return Refiner(rig_of(spec), np.sqrt((residuals**2).mean(axis=0)), params)
 
 
 def params_from(pm: PosemapConfig, seed: int) -> TrainParams:
@@ -160,13 +177,28 @@ def train(
     mapper.fit(x[tr], y[tr], x[va], y[va], progress=progress)
     fit_s = time.perf_counter() - t1
     y_pred = mapper.predict(x[te])
+    held_out = va if va.any() else tr
+    val_pred = mapper.predict(x[held_out])
+    refiner, refine_s = None, 0.0
+    if pm.refine == "fit":
+        refiner = make_refiner(pm, data, spec, val_pred - y[held_out], seed)
+        learned = y_pred
+        t2 = time.perf_counter()
+        y_pred = refiner(data.landmarks[te], learned)
+        refine_s = time.perf_counter() - t2
     metrics = evaluate(y_pred, y[te], y[tr].mean(axis=0))
-    if va.any():
-        val_pred = mapper.predict(x[va])
-        metrics["posemap.val.mae_rad"] = float(np.abs(val_pred - y[va]).mean())
-    else:
-        metrics["posemap.val.mae_rad"] = metrics["posemap.mae_rad"]
+    metrics["posemap.val.mae_rad"] = float(np.abs(val_pred - y[held_out]).mean())
     metrics.update(_timing(mapper, spec, x[te], data.landmarks[te]))
+    if refiner is not None:
+        metrics.update(
+            {
+                "posemap.learned.mae_rad": float(np.abs(learned - y[te]).mean()),
+                "posemap.refine.ms_per_sample": 1e3 * refine_s / max(1, int(te.sum())),
+                "posemap.refine.restarted": refiner.restarted / max(1, int(te.sum())),
+                "posemap.inference_us_per_sample": metrics["posemap.inference_us_per_sample"]
+                + 1e6 * refine_s / max(1, int(te.sum())),
+            }
+        )
     metrics.update(
         {
             "posemap.train.samples": float(sizes["train"]),
@@ -193,6 +225,7 @@ def train(
         },
         "joint_names": list(JOINT_NAMES),
         "config": asdict(pm),
+        "refine": refiner.to_dict() if refiner is not None else None,
         "config_yaml": config_yaml,
         "seed": seed,
         "metrics": {k: v for k, v in metrics.items() if ".joint." not in k},
@@ -211,6 +244,13 @@ def train(
                 f"  data           {sizes['train']} train / {sizes['val']} val / {sizes['test']} test samples, {data.estimator}, sha256 {data.sha256[:12]}",
                 f"  test           MAE {metrics['posemap.mae_rad']:.4f} rad ({metrics['posemap.mae_deg']:.2f} deg), MSE {metrics['posemap.mse_rad2']:.4f} rad^2, MPJPE {metrics['posemap.mpjpe_m'] * 100:.1f} cm",
                 f"  mean pose      MAE {metrics['posemap.baseline.mean_pose.mae_rad']:.4f} rad (the baseline to beat)",
+                *(
+                    [
+                        f"  refine=fit     learned model alone MAE {metrics['posemap.learned.mae_rad']:.4f} rad; fit {metrics['posemap.refine.ms_per_sample']:.1f} ms/sample, {100 * metrics['posemap.refine.restarted']:.0f} % restarted"
+                    ]
+                    if refiner is not None
+                    else []
+                ),
                 f"  worst joints   {worst_text}",
                 f"  fit            {fit_s:.1f} s; inference {metrics['posemap.inference_us_per_sample']:.1f} us/sample (batch), {metrics['posemap.latency_ms']:.2f} ms one sample",
                 f"  model          {run_dir / MODEL_DIRNAME}  (report: {run_dir / REPORT_NAME})",
@@ -268,4 +308,8 @@ class TrainedMapper:
         trained (rig features are expressed in the base's frame; other features ignore it).
         """
         spec = self.spec if position is None else {**self.spec, "position": list(position)}
-        return self.mapper.predict(features_for(np.asarray(landmarks, dtype=np.float32), spec))
+        landmarks = np.asarray(landmarks, dtype=np.float32)
+        q = self.mapper.predict(features_for(landmarks, spec))
+        if self.info.get("refine"):
+            q = Refiner.from_dict(self.info["refine"], rig_of(spec))(landmarks, q)
+        return q
