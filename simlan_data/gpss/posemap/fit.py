@@ -254,12 +254,17 @@ class Refiner:
         q_learned = np.atleast_2d(np.asarray(q_learned, dtype=np.float64))
         out = np.empty_like(q_learned)
         for s in range(0, len(q_learned), batch):
-            out[s : s + batch] = self._batch(
-                np.asarray(landmarks[s : s + batch]), q_learned[s : s + batch], s
-            )
+            out[s : s + batch] = self._batch(np.asarray(landmarks[s : s + batch]), q_learned[s : s + batch])
         return curve_medians(out, limit_scale=self.params.limit_scale) if self.params.curve_median else out
 
-    def _batch(self, landmarks: NDArray[np.float32], q0: F64, offset: int) -> F64:
+    def _arm_starts(self) -> F64:
+        """(starts - 1, arm joints): where the restarts put the arms, drawn once from the seed."""
+        lo, hi = box(self.params.limit_scale)
+        arms = _arm_joints()
+        rng = np.random.default_rng(self.params.seed)
+        return rng.uniform(lo[arms], hi[arms], size=(self.params.starts - 1, len(arms)))
+
+    def _batch(self, landmarks: NDArray[np.float32], q0: F64) -> F64:
         p = self.params
         q, c = fit_from(landmarks, self.rig, q0, q0, self.prior_sigma, p)
         detected = (landmarks[..., 3] > 0).any(axis=2)  # (N, C)
@@ -267,12 +272,10 @@ class Refiner:
         again = np.flatnonzero(c / dof > p.restart_chi2)
         if p.starts > 1 and len(again):
             self.restarted += len(again)
-            rng = np.random.default_rng([p.seed, offset])
-            lo, hi = box(p.limit_scale)
             arms = _arm_joints()
-            for _ in range(p.starts - 1):
+            for arm_start in self._arm_starts():  # the same for every sample: batching changes nothing
                 start = q0[again].copy()
-                start[:, arms] = rng.uniform(lo[arms], hi[arms], size=(len(again), len(arms)))
+                start[:, arms] = arm_start
                 q2, c2 = fit_from(landmarks[again], self.rig, start, q0[again], self.prior_sigma, p)
                 better = c2 < c[again]
                 q[again[better]], c[again[better]] = q2[better], c2[better]
