@@ -132,3 +132,11 @@ def test_bad_refine_config_is_one_line_and_exit_2(tmp_path: Path, override: str,
     assert proc.returncode == 2, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and expected in lines[0], proc.stderr
+
+
+def test_pixel_noise_recovers_the_projection_estimators_noise(trained: tuple[Path, Path]) -> None:
+    """What the fit measures for an estimator without a noise model (MediaPipe), checked where the
+    truth is known: the projection estimator's 1 px (seen) and 8 px (hidden) at 480x270."""
+    data = read_dataset(trained[0])
+    seen, hidden = F.pixel_noise(data.landmarks, data.joints, _rig(trained[0]))
+    assert seen == pytest.approx(1.0, rel=0.1) and hidden == pytest.approx(8.0, rel=0.15), (seen, hidden)

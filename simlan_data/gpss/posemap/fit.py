@@ -24,7 +24,15 @@ from numpy.typing import NDArray
 
 from .ambiguity import curve_medians
 from .features import Rig
-from .skeleton import LOWER, NUM_JOINTS, UPPER, _chain, _landmark_links, forward_kinematics
+from .skeleton import (
+    LOWER,
+    NUM_JOINTS,
+    UPPER,
+    _chain,
+    _landmark_links,
+    forward_kinematics,
+    landmark_positions,
+)
 
 F64 = NDArray[np.float64]
 
@@ -224,6 +232,29 @@ def fit_from(
 
 def _refine_batch(landmarks: NDArray[np.float32], rig: Rig, q0: F64, params: FitParams) -> F64:
     return fit_from(landmarks, rig, q0, q0, params.prior_rad, params)[0]
+
+
+def pixel_noise(landmarks: NDArray[np.float32], q: F64, rig: Rig) -> tuple[float, float]:
+    """How far an estimator's landmarks lie from the skeleton's own, projected (robust sigma per
+    axis, pixels): (seen, hidden), from samples with known joints q. For an estimator without a
+    declared noise model (MediaPipe), measured on the training split."""
+    world = landmark_positions(q, rig.world_from_base)
+    errors: dict[bool, list[F64]] = {True: [], False: []}
+    for k, cam in enumerate(rig.cameras):
+        uv, ok = cam.project_camera_points(cam.world_to_camera(world.reshape(-1, 3)))
+        obs = landmarks[:, k, :, :2].reshape(-1, 2).astype(np.float64) * [cam.width, cam.height]
+        detected = np.repeat((landmarks[:, k, :, 3] > 0).any(axis=1), landmarks.shape[2])
+        seen = landmarks[:, k, :, 3].reshape(-1) > 0
+        for flag in (True, False):
+            keep = ok & detected & (seen == flag)
+            errors[flag].append((uv[keep] - obs[keep]).ravel())
+
+    def sigma(e: list[F64], fallback: float) -> float:
+        v = np.concatenate(e)
+        return float(1.4826 * np.median(np.abs(v - np.median(v)))) if len(v) >= 20 else fallback
+
+    seen_px = max(sigma(errors[True], 1.0), 0.1)
+    return seen_px, max(sigma(errors[False], 8.0 * seen_px), seen_px)
 
 
 @cache

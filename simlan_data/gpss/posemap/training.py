@@ -24,7 +24,7 @@ from ...errors import ConfigError
 from ...posemap_config import PosemapConfig
 from .dataset import PoseDataset, read_dataset, split_of
 from .features import Rig, build_features
-from .fit import FitParams, Refiner
+from .fit import FitParams, Refiner, pixel_noise
 from .metrics import evaluate
 from .models import MAPPERS, PoseMapper, TrainParams, load_mapper
 from .skeleton import JOINT_NAMES
@@ -75,20 +75,31 @@ def features_for(landmarks: np.ndarray, spec: dict[str, Any]) -> np.ndarray:
 
 
 def make_refiner(
-    pm: PosemapConfig, data: PoseDataset, spec: dict[str, Any], residuals: np.ndarray, seed: int
+    pm: PosemapConfig,
+    data: PoseDataset,
+    spec: dict[str, Any],
+    residuals: np.ndarray,
+    train_landmarks: np.ndarray,
+    train_joints: np.ndarray,
+    seed: int,
 ) -> Refiner:
     """The kinematic fit after the learned model; it trusts the model per joint as far as the
     model's own held-out errors ``residuals`` (N, 47) say, and the landmarks as far as the
     estimator's noise (from the dataset) says."""
+    rig = rig_of(spec)
+    if data.meta.get("noise_px") is not None:  # the projection estimator: its declared noise
+        noise = float(data.meta["noise_px"]), float(data.meta.get("hidden_noise_px") or 8.0)
+    else:  # an estimator without one (MediaPipe): measured against the training split's skeletons
+        noise = pixel_noise(train_landmarks, train_joints, rig)
     params = FitParams(
-        noise_px=float(data.meta.get("noise_px", pm.noise_px)),
-        hidden_noise_px=float(data.meta.get("hidden_noise_px", pm.hidden_noise_px)),
+        noise_px=noise[0],
+        hidden_noise_px=noise[1],
         iterations=pm.refine_iterations,
         starts=pm.refine_starts,
         limit_scale=float(data.meta.get("limit_scale", pm.limit_scale)),
         seed=seed,
     )
-    return Refiner(rig_of(spec), np.sqrt((residuals**2).mean(axis=0)), params)
+    return Refiner(rig, np.sqrt((residuals**2).mean(axis=0)), params)
 
 
 def params_from(pm: PosemapConfig, seed: int) -> TrainParams:
@@ -181,7 +192,7 @@ def train(
     val_pred = mapper.predict(x[held_out])
     refiner, refine_s = None, 0.0
     if pm.refine == "fit":
-        refiner = make_refiner(pm, data, spec, val_pred - y[held_out], seed)
+        refiner = make_refiner(pm, data, spec, val_pred - y[held_out], data.landmarks[tr], y[tr], seed)
         learned = y_pred
         t2 = time.perf_counter()
         y_pred = refiner(data.landmarks[te], learned)
