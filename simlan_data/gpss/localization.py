@@ -31,6 +31,7 @@ from ..constants import NS_PER_S
 from ..geometry.camera import CameraModel
 from ..geometry.rotations import wrap_angle
 from ..geometry.transforms import Transform
+from .jpeg_regions import decode_gray_regions
 from .markers import (
     POSE_METHODS,
     Detection,
@@ -376,6 +377,11 @@ class Localizer:
         cached = self._full_cache.get(key) if key is not None else None
         if cached is not None:
             return ImageSearch(cached[0], cached[1], time.perf_counter() - t0)
+        if gray is None and plan != "full":
+            # only the regions searched: same pixels as a whole decode (jpeg_regions), or None
+            # for a JPEG without restart markers
+            assert data is not None
+            gray = decode_gray_regions(data, plan)  # type: ignore[arg-type]
         if gray is None:
             assert data is not None
             gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
