@@ -28,6 +28,7 @@ from ..agent_types import MARKER_SIZE_M, agent_type
 from ..constants import NS_PER_S
 from ..gpss.localization import Localizer, LocalizerParams
 from ..gpss.markers import MarkerMount
+from ..recording.messages import compressed_image_data
 from ..recording.reader import RecordingReader
 from .camera_health import CameraConsistency
 from .metrics import (
@@ -86,8 +87,8 @@ FrameSet = tuple[int | None, dict[str, Any], list[tuple[int, str, float, float]]
 def frame_sets(reader: RecordingReader, camera_ids: list[str], namespaces: list[str]) -> Iterator[FrameSet]:
     """One time-ordered pass over the cameras' images and the robots' velocity commands.
 
-    Yields per frame set: its stamp, the JPEG bytes per camera (as the reader gives them: no
-    copy), and the commands (stamp, namespace, v, w) read since the previous frame set, which
+    Yields per frame set: its stamp, the JPEG bytes per camera (a view of the message's bytes:
+    no copy, no deserialization), and the commands (stamp, namespace, v, w) read since the previous frame set, which
     include every command up to the next frame set's stamp: a control tick's command is known
     before the filter runs that tick. The reader keeps the small topics it passes for the
     metrics (no second pass over the bag).
@@ -97,17 +98,20 @@ def frame_sets(reader: RecordingReader, camera_ids: list[str], namespaces: list[
     pending: dict[str, Any] = {}
     pending_t: int | None = None
     cmds: list[tuple[int, str, float, float]] = []
-    for m in reader.messages([*images, *command_topics]):
+    for m in reader.messages([*images, *command_topics], raw=True):
         ns = command_topics.get(m.topic)
         if ns is not None:
-            cmds.append((m.stamp_ns, ns, m.msg.twist.linear.x, m.msg.twist.angular.z))
+            twist = reader.deserialize(m).msg.twist
+            cmds.append((m.stamp_ns, ns, twist.linear.x, twist.angular.z))
             continue
         if m.stamp_ns != pending_t:
             if pending_t is not None:
                 yield pending_t, pending, cmds
                 cmds = []
             pending, pending_t = {}, m.stamp_ns
-        pending[images[m.topic]] = m.msg.data
+        # the JPEG bytes without deserializing the message (most images are never searched)
+        data = compressed_image_data(m.msg)
+        pending[images[m.topic]] = data if data is not None else reader.deserialize(m).msg.data
     if pending_t is not None or cmds:
         yield pending_t, pending, cmds
 

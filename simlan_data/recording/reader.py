@@ -214,19 +214,8 @@ class RecordingReader:
             return
         try:
             for conn, stamp, data in self._raw_messages(conns, start_ns, stop_ns):
-                if raw:
-                    yield Message(conn.topic, int(stamp), conn.msgtype, data)
-                    continue
-                try:
-                    msg = self._store.deserialize_cdr(data, conn.msgtype)
-                except Exception as err:
-                    raise RecordingInputError(
-                        "message undecodable",
-                        f"{self.path} topic {conn.topic} at {stamp} ns",
-                        f"{type(err).__name__}: {_first(err)}",
-                        f"the recording is corrupt; `python -m simlan_data.recover {self.path}` keeps its intact chunks",
-                    ) from err
-                yield Message(conn.topic, int(stamp), conn.msgtype, msg)
+                message = Message(conn.topic, int(stamp), conn.msgtype, data)
+                yield message if raw else self.deserialize(message)
         except RecordingInputError:
             raise
         except Exception as err:
@@ -234,6 +223,19 @@ class RecordingReader:
                 self.path,
                 f"{type(err).__name__} while reading messages: {_first(err)}",
             ) from err
+
+    def deserialize(self, raw: Message) -> Message:
+        """A message read with ``raw=True``, decoded (for readers that decode only some)."""
+        try:
+            msg = self._store.deserialize_cdr(raw.msg, raw.msgtype)
+        except Exception as err:
+            raise RecordingInputError(
+                "message undecodable",
+                f"{self.path} topic {raw.topic} at {raw.stamp_ns} ns",
+                f"{type(err).__name__}: {_first(err)}",
+                f"the recording is corrupt; `python -m simlan_data.recover {self.path}` keeps its intact chunks",
+            ) from err
+        return Message(raw.topic, raw.stamp_ns, raw.msgtype, msg)
 
     def _raw_messages(
         self, conns: list[Any], start_ns: int | None, stop_ns: int | None, *, cache: bool = True
