@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -263,6 +264,39 @@ class RecordingReader:
             if conn.id in ids and lo <= stamp < hi:
                 yield conn, stamp, data
 
+    def detach_after_fork(self) -> None:
+        """In a forked child process: give the bag files their own file offsets, so that
+        reading here cannot move the parent's (a fork shares open file descriptions)."""
+        storages = getattr(self._reader.storage, "storages", None)
+        if not storages:
+            raise RuntimeError("unknown rosbags reader layout")
+        for storage in storages:
+            bio, path = getattr(storage, "bio", None), getattr(storage, "path", None)
+            if bio is None or path is None:
+                raise RuntimeError("unknown rosbags reader layout")
+            fd = bio.fileno()
+            offset = os.lseek(fd, 0, os.SEEK_CUR)
+            own = os.open(path, os.O_RDONLY)
+            os.dup2(own, fd)
+            os.close(own)
+            os.lseek(fd, offset, os.SEEK_SET)
+
+    def small_topics(self) -> list[tuple[int, int, bytes]] | None:
+        """The small topics' raw messages (connection id, log time, CDR) a whole pass over
+        images kept (see STREAMED_TYPES), or None if no such pass has run: for
+        :meth:`adopt_small_topics` in another process."""
+        if self._small is None:
+            return None
+        return [(conn.id, int(stamp), bytes(data)) for conn, stamp, data in self._small]
+
+    def adopt_small_topics(self, rows: list[tuple[int, int, bytes]]) -> None:
+        """Take the small topics another reader of the same recording kept (its
+        :meth:`small_topics`), so that reading them here costs no pass over the bag."""
+        by_id = {c.id: c for c in self._reader.connections}
+        if any(conn_id not in by_id for conn_id, _, _ in rows):
+            raise ValueError("small topics of another recording")
+        self._small = [(by_id[conn_id], stamp, data) for conn_id, stamp, data in rows]
+
     def _stream_filling_cache(self, conns: list[Any], small: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
         """``conns``' messages from a pass that reads the small topics too and caches them."""
         wanted = {c.id for c in conns}
@@ -292,6 +326,22 @@ class RecordingReader:
                 ) from err
             return Message(conn.topic, int(stamp), conn.msgtype, msg)
         return None
+
+    def firsts(self, topics: Iterable[str]) -> dict[str, Message]:
+        """The first message of each of ``topics`` that has one, from one pass that stops when
+        it has them all (:meth:`first` of each would read the start of the bag again each time)."""
+        wanted = set(topics)
+        conns = [c for c in self._reader.connections if c.topic in wanted]
+        present = {c.topic for c in conns}
+        out: dict[str, Message] = {}
+        if not conns:
+            return out
+        for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
+            if conn.topic not in out:
+                out[conn.topic] = self.deserialize(Message(conn.topic, int(stamp), conn.msgtype, data))
+                if len(out) == len(present):
+                    break
+        return out
 
     # ----------------------------------------------------------------------------- summary
     def summary(self) -> str:
