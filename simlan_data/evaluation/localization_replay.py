@@ -31,7 +31,7 @@ import polars as pl
 from ..agent_types import MARKER_SIZE_M, agent_type
 from ..constants import NS_PER_S
 from ..errors import ConfigError, RecordingInputError
-from ..gpss.localization import Localizer, LocalizerParams
+from ..gpss.localization import ImageSearch, Localizer, LocalizerParams
 from ..gpss.markers import MarkerMount
 from ..recording.messages import compressed_image_data
 from ..recording.reader import RecordingReader
@@ -196,7 +196,10 @@ def _read_frame_sets(
             for data in jpegs.values():
                 conn.send_bytes(data)
         conn.send(("recorded", recorded.rows()))
-        conn.send(("small", reader.small_topics()))
+        small = reader.small_topics()
+        conn.send(("small", small is not None))
+        if small is not None:
+            conn.send_bytes(small)
         conn.send(("end", None))
     except BaseException as err:  # handed to the consumer, raised there
         try:
@@ -251,8 +254,8 @@ class ReadingProcess:
                 elif kind == "recorded":
                     self.recorded.take(value)
                 elif kind == "small":
-                    if value is not None:
-                        self.reader.adopt_small_topics(value)
+                    if value:
+                        self.reader.adopt_small_topics(receive.recv_bytes())
                 elif kind == "error":
                     raise value
                 else:
@@ -343,8 +346,15 @@ def replay_localizer(
             for cid, plan in planned
             if plan
         ]
+        # this thread searches too, from the last image back, each one no worker has started
+        # (a cancelled future is never run): no idle wait, fewer hand-overs between threads
+        own: dict[str, ImageSearch] = {}
+        for cid, plan, job in reversed(jobs):
+            if not job.cancel():
+                break
+            own[cid] = localizer.detect(cid, plan, jpeg=pending[cid])
         for cid, plan, job in jobs:
-            localizer.observe(pending_t, cid, plan, job.result())
+            localizer.observe(pending_t, cid, plan, own[cid] if cid in own else job.result())
         localizer.close_frame(pending_t)
         if consistency is not None:
             consistency.add(localizer.last_observations)
@@ -357,7 +367,8 @@ def replay_localizer(
         if reading is not None
         else in_background(frame_sets(reader, camera_order, list(rows)), depth=4)
     )
-    with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1), thread_name_prefix="search") as pool:
+    workers = max(1, min(8, os.cpu_count() or 1) - 1)  # (and this thread)
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="search") as pool:
         for stamp_ns, jpegs, cmds in sets:
             for t_ns, ns, v, w in cmds:
                 commands.setdefault(t_ns, []).append((ns, v, w))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import pickle
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -101,6 +102,7 @@ class RecordingReader:
         if not all(isinstance(n, int) and not isinstance(n, bool) for n in counts):
             raise _bad(p, "metadata.yaml holds a message count or time that is not an integer")
         self._small: list[tuple[Any, int, bytes]] | None = None  # see STREAMED_TYPES
+        self._small_pickled: bytes | None = None  # see adopt_small_topics
         self._register_bag_types()
         self.format_version = self.custom_data.get(METADATA_KEY_FORMAT, "")
         if check_format:
@@ -242,6 +244,8 @@ class RecordingReader:
         self, conns: list[Any], start_ns: int | None, stop_ns: int | None, *, cache: bool = True
     ) -> Iterator[tuple[Any, int, bytes]]:
         """(connection, log time, CDR bytes) in log-time order; small topics from the cache."""
+        if self._small_pickled is not None:
+            self._unpickle_small()
         small = [c for c in self._reader.connections if c.msgtype not in STREAMED_TYPES]
         fits = sum(c.msgcount for c in small) <= SMALL_TOPICS_CACHE_MAX_MESSAGES
         cacheable = fits and all(c.msgtype not in STREAMED_TYPES for c in conns)
@@ -281,17 +285,25 @@ class RecordingReader:
             os.close(own)
             os.lseek(fd, offset, os.SEEK_SET)
 
-    def small_topics(self) -> list[tuple[int, int, bytes]] | None:
-        """The small topics' raw messages (connection id, log time, CDR) a whole pass over
-        images kept (see STREAMED_TYPES), or None if no such pass has run: for
-        :meth:`adopt_small_topics` in another process."""
+    def small_topics(self) -> bytes | None:
+        """The small topics' raw messages a whole pass over images kept (see STREAMED_TYPES),
+        pickled, or None if no such pass has run: for :meth:`adopt_small_topics` in another
+        process."""
         if self._small is None:
             return None
-        return [(conn.id, int(stamp), bytes(data)) for conn, stamp, data in self._small]
+        return pickle.dumps([(conn.id, int(stamp), bytes(data)) for conn, stamp, data in self._small])
 
-    def adopt_small_topics(self, rows: list[tuple[int, int, bytes]]) -> None:
+    def adopt_small_topics(self, pickled: bytes) -> None:
         """Take the small topics another reader of the same recording kept (its
-        :meth:`small_topics`), so that reading them here costs no pass over the bag."""
+        :meth:`small_topics`), so that reading them here costs no pass over the bag; unpickled
+        only when first read."""
+        self._small_pickled = pickled
+
+    def _unpickle_small(self) -> None:
+        pickled, self._small_pickled = self._small_pickled, None
+        if self._small is not None or pickled is None:
+            return
+        rows = pickle.loads(pickled)  # (our own reading process's, see small_topics)
         by_id = {c.id: c for c in self._reader.connections}
         if any(conn_id not in by_id for conn_id, _, _ in rows):
             raise ValueError("small topics of another recording")
