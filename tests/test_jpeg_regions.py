@@ -141,3 +141,21 @@ def test_compressed_image_bytes_are_read_without_deserializing(short_run: Path) 
     assert compressed_image_data(b"\x01\x00\x00\x00" + bytes(40)) is None  # big-endian CDR
     assert compressed_image_data(m.msg[:-5]) is None  # truncated
     assert compressed_image_data(bytes(m.msg) + bytes(8)) is None  # not this layout
+
+
+def test_damaged_jpegs_never_raise(recorded) -> None:
+    """Untrusted bytes (a corrupt recording): a region decode gives the whole decode's pixels
+    where the regions hold, or None (then the localizer decodes the image whole), never an
+    exception from the parser."""
+    _, images = recorded
+    rng = np.random.default_rng(3)
+    jpeg = images[0][1]
+    for _ in range(300):
+        data = bytearray(jpeg)
+        for _ in range(int(rng.integers(1, 6))):
+            at = int(rng.integers(0, 700)) if rng.random() < 0.7 else int(rng.integers(0, len(data)))
+            data[at] = int(rng.integers(0, 256))
+        if rng.random() < 0.2:
+            data = data[: int(rng.integers(0, len(data)))]
+        gray = decode_gray_regions(bytes(data), [(0, 0, 100, 100), (500, 300, 600, 400)])
+        assert gray is None or gray.dtype == np.uint8

@@ -47,11 +47,20 @@ class JpegSegments:
     ends: NDArray[np.int64]  # per segment: one past its last byte (before the marker)
 
 
+MAX_PIXELS = 8192 * 8192  # (as recording.codecs: larger images from a recording are refused)
+
+
 def segments(jpeg: bytes) -> JpegSegments | None:
     """Parse a JPEG's headers and find its restart segments; None if it cannot be cropped
     (progressive or multi-scan, no restart interval, an interval that does not divide an MCU
-    row, or anything unexpected)."""
-    data = bytes(jpeg)
+    row, or anything unexpected: untrusted bytes never raise here)."""
+    try:
+        return _segments(bytes(jpeg))
+    except (struct.error, IndexError, ValueError):
+        return None
+
+
+def _segments(data: bytes) -> JpegSegments | None:
     n = len(data)
     if n < 4 or data[:2] != b"\xff\xd8":
         return None
@@ -68,6 +77,8 @@ def segments(jpeg: bytes) -> JpegSegments | None:
         if length < 2 or pos + 2 + length > n:
             return None
         if marker in _SOF_SEQUENTIAL:
+            if length < 8 or length != 8 + 3 * data[body + 5]:
+                return None
             sof = pos
         elif marker in _SOF_OTHER:
             return None
@@ -85,10 +96,12 @@ def segments(jpeg: bytes) -> JpegSegments | None:
         return None
     height, width = struct.unpack_from(">HH", data, sof + 5)
     ncomp = data[sof + 9]
-    if width == 0 or height == 0 or sof + 10 + 3 * ncomp > n:
+    if width == 0 or height == 0 or width * height > MAX_PIXELS or ncomp not in (1, 3):
         return None
     hs = [data[sof + 11 + 3 * i] >> 4 for i in range(ncomp)]
     vs = [data[sof + 11 + 3 * i] & 0x0F for i in range(ncomp)]
+    if not all(1 <= f <= 4 for f in (*hs, *vs)):
+        return None
     if ncomp == 1:  # a single-component scan is not interleaved: its MCU is one 8x8 block
         mcu_w = mcu_h = 8
     else:
