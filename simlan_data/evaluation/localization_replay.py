@@ -99,9 +99,9 @@ def frame_sets(
     """One time-ordered pass over the cameras' images and the robots' velocity commands.
 
     Yields per frame set: its stamp, the JPEG bytes per camera (a view of the message's bytes:
-    no copy, no deserialization), and the commands (stamp, namespace, v, w) read since the previous frame set, which
-    include every command up to the next frame set's stamp: a control tick's command is known
-    before the filter runs that tick. The reader keeps the small topics it passes for the
+    no copy, no deserialization), and the commands (stamp, namespace, v, w) read since the
+    previous frame set, which include every command up to the next frame set's stamp: a control
+    tick's command is known before the filter runs that tick. The reader keeps the small topics it passes for the
     metrics (no second pass over the bag); ``recorded`` (if given) collects the metrics' rows of
     them on the way.
     """
@@ -361,7 +361,8 @@ def replay_localizer(
         control_until(pending_t, inclusive=True)
 
     #   reading process (or thread): bag -> (frame set, commands before the next one) --pipe-->
-    #   this thread: plan -> search (worker threads) -> observe in camera order -> fuse -> ticks
+    #   this thread: plan -> search (a worker thread and this one) -> observe in camera order ->
+    #   fuse -> control ticks
     sets = (
         reading
         if reading is not None
