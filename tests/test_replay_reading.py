@@ -1,5 +1,6 @@
-"""The localization replay's reading process: the same results as reading on a thread, its
-errors raised in the replay, stopped when the replay stops early. Real runs, real forks."""
+"""The localization replay's reading process (--set reader=process): the same results as the
+reading thread (the default), its errors raised in the replay, stopped when the replay stops
+early; the rows the metrics need, collected while reading. Real runs, real forks."""
 
 from __future__ import annotations
 
@@ -27,8 +28,8 @@ def _replay(recording: Path, out: Path, *extra: str) -> dict[str, float]:
 
 def test_reading_process_and_reading_thread_give_the_same_replay(short_run: Path, tmp_path: Path) -> None:
     recording = short_run / "recording"
-    by_process = _replay(recording, tmp_path / "process")
-    by_thread = _replay(recording, tmp_path / "thread", "--set", "reader=thread")
+    by_process = _replay(recording, tmp_path / "process", "--set", "reader=process")
+    by_thread = _replay(recording, tmp_path / "thread")  # (the default)
     assert by_process["replay.children_cpu_s"] > 0  # the reading process's CPU is counted
     assert by_thread["replay.children_cpu_s"] == 0
     timed = ("replay.speed_x_realtime", "replay.localization.wall_s", "replay.localization.frame_ms")
@@ -97,4 +98,4 @@ def test_unknown_reader_is_one_error_line(short_run: Path, tmp_path: Path) -> No
         module="simlan_data.replay",
     )
     assert proc.returncode == 2
-    assert "error: unknown reader 'disk' in replay --set reader: known: process, thread" in proc.stderr
+    assert "error: unknown reader 'disk' in replay --set reader: known: thread, process" in proc.stderr

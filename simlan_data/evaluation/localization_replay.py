@@ -8,8 +8,9 @@ the same algorithm and parameters it reproduces the live estimates exactly; with
 Options (``--set``): ``method``, ``unobserved_timeout_s``, ``lost_timeout_s``,
 ``processing_delay_s``, ``bias_m`` (default: the recording's ``localization`` section) and the
 camera faults ``drop_cameras``, ``yaw_error_deg``, ``yaw_error_cameras`` (default: its ``faults``
-section); ``navigation=false`` skips the navigation metrics; ``reader=thread`` reads the bag on
-a thread instead of a forked process (the default on Linux).
+section); ``navigation=false`` skips the navigation metrics; ``reader=process`` reads the bag in
+a forked process instead of on a thread (Linux; measured slower on 2 busy cores, see
+:class:`ReadingProcess`).
 """
 
 from __future__ import annotations
@@ -176,7 +177,7 @@ def in_background(items: Iterator[T], *, depth: int) -> Iterator[T]:
         thread.join()
 
 
-READERS = ("process", "thread")
+READERS = ("thread", "process")
 
 
 def _read_frame_sets(
@@ -216,10 +217,14 @@ class ReadingProcess:
     reader the small topics it kept. Iterate it once; close it (or use it as a context manager)
     to stop the process early.
 
-    Reading a bag is mostly Python (rosbags walks every record of every chunk) and would hold
-    the GIL against the localizer's own Python; in another process it runs on the other core,
-    and collects the metrics' rows of the recorded topics while it waits for the consumer. Its
-    CPU time is the replay's too (``replay.cpu_s`` counts child processes).
+    Reading a bag is mostly Python (rosbags walks every record of every chunk) and holds the GIL
+    against the localizer's own Python; in another process it runs on the other core, and
+    collects the metrics' rows of the recorded topics while it waits for the consumer. Its CPU
+    time is the replay's too (``replay.cpu_s`` counts child processes). Not the default: the
+    hand-over of every image through a pipe and the fork's copy-on-write page faults cost about
+    0.2 CPU s per 20 s of the 12-camera recording, and on 2 shared cores it was slower than the
+    reading thread (measured 2026-11-23 at load 4, 12 cameras, 20 s: 1.47-1.55 s against
+    1.31-1.48 s a replay); it may pay on a machine with cores to spare.
     """
 
     def __init__(
@@ -246,7 +251,7 @@ class ReadingProcess:
                         "replay failed",
                         str(self.reader.path),
                         f"its reading process ended early (exit code {proc.exitcode})",
-                        "replay with --set reader=thread",
+                        "replay without --set reader=process",
                     ) from None
                 if kind == "item":
                     stamp_ns, cids, cmds = value
@@ -294,12 +299,14 @@ def replay_localizer(
     consistency: CameraConsistency | None = None,
     *,
     reading: ReadingProcess | None = None,
+    recorded: RecordedRows | None = None,
 ) -> tuple[Localizer, dict[str, pl.DataFrame]]:
     """Run the localizer over the recording; returns it and per-agent estimate tables.
 
     ``consistency`` (if given) gets every frame set's per-camera observations. ``reading``: the
     recording's frame sets from a reading process already started (for at least the cameras
-    and agents of ``config``); without it a thread reads them.
+    and agents of ``config``; it fills its own rows of the recorded topics); without it a thread
+    reads them, and fills ``recorded`` (if given) on the way.
     """
     mounts, _ = marker_mounts(config)
     camera_order = [str(c) for c in (config.get("cameras") or {}).get("ids", sorted(cameras))]
@@ -366,7 +373,7 @@ def replay_localizer(
     sets = (
         reading
         if reading is not None
-        else in_background(frame_sets(reader, camera_order, list(rows)), depth=4)
+        else in_background(frame_sets(reader, camera_order, list(rows), recorded), depth=4)
     )
     workers = max(1, min(8, os.cpu_count() or 1) - 1)  # (and this thread)
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="search") as pool:
@@ -398,7 +405,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
             f"unknown reader {read_in!r}",
             "replay --set reader",
             f"known: {', '.join(READERS)}",
-            "use process",
+            "use thread",
         )
     wall0 = time.perf_counter()
     consistency = CameraConsistency()
@@ -409,20 +416,21 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
         estimates_of=[m.namespace for m in mounts],
         navigation_of=drives if ctx.options.get("navigation", True) else (),
     )
-    collected = read_in == "process" and sys.platform == "linux"
+    in_process = read_in == "process" and sys.platform == "linux"
     # the reading process starts before the cameras are known: it reads while they are built
     with (
         ReadingProcess(
             ctx.reader, image_camera_ids(ctx.reader, config), [m.namespace for m in mounts], recorded
         )
-        if collected
+        if in_process
         else contextlib.nullcontext()
     ) as reading:
         localizer, tables = replay_localizer(
-            ctx.reader, config, ctx.believed_cameras, params, consistency, reading=reading
+            ctx.reader, config, ctx.believed_cameras, params, consistency, reading=reading, recorded=recorded
         )
     wall = time.perf_counter() - wall0
-    truth = recorded.truth_tables() if collected else ground_truth(ctx.reader)
+    # the recording's own topics (ground truth, live estimates, navigation): read on the way
+    truth = recorded.truth_tables()
     visibility = {m.namespace: Visibility(ctx.cameras, kinds[m.namespace]) for m in mounts}
     metrics = localization_metrics(truth, tables, visibility)
     frames = [t.seconds for t in localizer.timings]
@@ -447,11 +455,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
             },
             orient="row",
         ).write_parquet(ctx.out_dir / "frame_timings.parquet")
-    live = (
-        recorded.estimate_tables()
-        if collected
-        else estimates_from_recording(ctx.reader, [m.namespace for m in mounts])
-    )
+    live = recorded.estimate_tables()
     diffs = []
     for ns, table in tables.items():
         joined = table.join(live[ns], on="stamp_ns", how="inner", suffix="_live").filter(
@@ -472,7 +476,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     if frames_out:
         pl.concat(frames_out).write_parquet(ctx.out_dir / "estimates.parquet")
     if ctx.options.get("navigation", True):
-        metrics.update(navigation_metrics(recorded if collected else ctx.reader, truth, drives))
+        metrics.update(navigation_metrics(recorded, truth, drives))
     return metrics
 
 

@@ -322,10 +322,6 @@ def replay_one(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if one_thread and algorithm == "localization":
-        # workers side by side keep the cores busy already: a reading process per replay would
-        # only add its hand-over of the images
-        options = {"reader": "thread", **options}
     try:
         with RecordingReader(recording) as reader:
             metrics = REPLAY_ALGORITHMS[algorithm](ReplayContext(reader, out, dict(options)))
