@@ -256,9 +256,15 @@ def gpss_runs(out: Path, duration: float) -> tuple[str, dict]:
 def replay(recordings: dict[str, Path], out: Path) -> tuple[str, dict]:
     """Replay the localization over each recording; speed against real time."""
     raw, rows = {}, []
-    for i, (name, recording) in enumerate(recordings.items()):
+    # the bag read by a thread (the default) and, for the first recording, by a forked process
+    # (--set reader=process: off the replay's GIL, but every image goes through a pipe)
+    first = next(iter(recordings), None)
+    cases = [(name, rec, []) for name, rec in recordings.items()]
+    if first is not None:
+        cases.insert(1, (f"{first}, bag read by a process", recordings[first], ["--set", "reader=process"]))
+    for i, (name, recording, extra) in enumerate(cases):
         dest = out / f"replay_{i}"
-        proc = run_cli(str(recording), "--out", str(dest), module="simlan_data.replay")
+        proc = run_cli(str(recording), "--out", str(dest), *extra, module="simlan_data.replay")
         if proc.returncode != 0:
             raise SystemExit(f"replay of {recording} failed: {proc.stderr.strip()[-2000:]}")
         m = json.loads((dest / "metrics.json").read_text())
@@ -274,6 +280,8 @@ def replay(recordings: dict[str, Path], out: Path) -> tuple[str, dict]:
                 f"{m['replay.wall_s'] * m['replay.speed_x_realtime']:.1f}",
                 f"{m['replay.wall_s']:.2f}",
                 f"{m['replay.cpu_s']:.2f}",
+                f"{m['replay.main_thread_cpu_s']:.2f}",
+                f"{m.get('replay.children_cpu_s', 0.0):.2f}",
                 f"**{m['replay.speed_x_realtime']:.1f}**",
                 f"{int(m['replay.localization.frames_processed'])} ({int(m['replay.localization.frames_full'])} full)",
                 f"{m.get('replay.localization.max_diff_to_live_m', float('nan')):.3g} m",
@@ -285,6 +293,8 @@ def replay(recordings: dict[str, Path], out: Path) -> tuple[str, dict]:
             "recorded s",
             "wall s",
             "CPU s",
+            "of it main thread",
+            "of it reading process",
             "x real time",
             "images searched",
             "max diff to live",

@@ -8,13 +8,18 @@ the same algorithm and parameters it reproduces the live estimates exactly; with
 Options (``--set``): ``method``, ``unobserved_timeout_s``, ``lost_timeout_s``,
 ``processing_delay_s``, ``bias_m`` (default: the recording's ``localization`` section) and the
 camera faults ``drop_cameras``, ``yaw_error_deg``, ``yaw_error_cameras`` (default: its ``faults``
-section); ``navigation=false`` skips the navigation metrics.
+section); ``navigation=false`` skips the navigation metrics; ``reader=process`` reads the bag in
+a forked process instead of on a thread (Linux; measured slower on 2 busy cores, see
+:class:`ReadingProcess`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import multiprocessing
 import os
 import queue
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -26,11 +31,14 @@ import polars as pl
 
 from ..agent_types import MARKER_SIZE_M, agent_type
 from ..constants import NS_PER_S
-from ..gpss.localization import Localizer, LocalizerParams
+from ..errors import ConfigError, RecordingInputError
+from ..gpss.localization import ImageSearch, Localizer, LocalizerParams
 from ..gpss.markers import MarkerMount
+from ..recording.messages import compressed_image_data
 from ..recording.reader import RecordingReader
 from .camera_health import CameraConsistency
 from .metrics import (
+    RecordedRows,
     Visibility,
     estimates_from_recording,
     ground_truth,
@@ -83,31 +91,46 @@ def marker_mounts(config: dict[str, Any]) -> tuple[list[MarkerMount], dict[str, 
 FrameSet = tuple[int | None, dict[str, Any], list[tuple[int, str, float, float]]]
 
 
-def frame_sets(reader: RecordingReader, camera_ids: list[str], namespaces: list[str]) -> Iterator[FrameSet]:
+def frame_sets(
+    reader: RecordingReader,
+    camera_ids: list[str],
+    namespaces: list[str],
+    recorded: RecordedRows | None = None,
+) -> Iterator[FrameSet]:
     """One time-ordered pass over the cameras' images and the robots' velocity commands.
 
-    Yields per frame set: its stamp, the JPEG bytes per camera (as the reader gives them: no
-    copy), and the commands (stamp, namespace, v, w) read since the previous frame set, which
-    include every command up to the next frame set's stamp: a control tick's command is known
-    before the filter runs that tick. The reader keeps the small topics it passes for the
-    metrics (no second pass over the bag).
+    Yields per frame set: its stamp, the JPEG bytes per camera (a view of the message's bytes:
+    no copy, no deserialization), and the commands (stamp, namespace, v, w) read since the
+    previous frame set, which include every command up to the next frame set's stamp: a control
+    tick's command is known before the filter runs that tick. The reader keeps the small topics it passes for the
+    metrics (no second pass over the bag); ``recorded`` (if given) collects the metrics' rows of
+    them on the way.
     """
     images = {f"/camera_{c}{IMAGE_SUFFIX}": c for c in camera_ids}
     command_topics = {f"/{ns}/cmd_vel": ns for ns in namespaces}
     pending: dict[str, Any] = {}
     pending_t: int | None = None
     cmds: list[tuple[int, str, float, float]] = []
-    for m in reader.messages([*images, *command_topics]):
+    extra = set(recorded.topics) if recorded is not None else set()
+    for m in reader.messages([*images, *command_topics, *extra], raw=True):
+        if m.topic in extra:
+            assert recorded is not None
+            recorded.add(reader.deserialize(m))
+            if m.topic not in command_topics:
+                continue
         ns = command_topics.get(m.topic)
         if ns is not None:
-            cmds.append((m.stamp_ns, ns, m.msg.twist.linear.x, m.msg.twist.angular.z))
+            twist = reader.deserialize(m).msg.twist
+            cmds.append((m.stamp_ns, ns, twist.linear.x, twist.angular.z))
             continue
         if m.stamp_ns != pending_t:
             if pending_t is not None:
                 yield pending_t, pending, cmds
                 cmds = []
             pending, pending_t = {}, m.stamp_ns
-        pending[images[m.topic]] = m.msg.data
+        # the JPEG bytes without deserializing the message (most images are never searched)
+        data = compressed_image_data(m.msg)
+        pending[images[m.topic]] = data if data is not None else reader.deserialize(m).msg.data
     if pending_t is not None or cmds:
         yield pending_t, pending, cmds
 
@@ -154,16 +177,136 @@ def in_background(items: Iterator[T], *, depth: int) -> Iterator[T]:
         thread.join()
 
 
+READERS = ("thread", "process")
+
+
+def _read_frame_sets(
+    reader: RecordingReader, camera_ids: list[str], namespaces: list[str], recorded: RecordedRows, conn: Any
+) -> None:
+    """The reading process: per frame set its stamp, cameras and commands, then each camera's
+    JPEG bytes (written straight from the bag's decompressed chunk); then the rows of the
+    recording's own topics that the metrics need (collected while it waits for the consumer),
+    the small topics the pass kept, and the end; or the error."""
+    try:
+        try:
+            reader.detach_after_fork()
+        except Exception:  # (another rosbags layout) open the recording again
+            reader = RecordingReader(reader.path, check_format=False)
+        for stamp_ns, jpegs, cmds in frame_sets(reader, camera_ids, namespaces, recorded):
+            conn.send(("item", (stamp_ns, list(jpegs), cmds)))
+            for data in jpegs.values():
+                conn.send_bytes(data)
+        conn.send(("recorded", recorded.rows()))
+        small = reader.small_topics()
+        conn.send(("small", small is not None))
+        if small is not None:
+            conn.send_bytes(small)
+        conn.send(("end", None))
+    except BaseException as err:  # handed to the consumer, raised there
+        try:
+            conn.send(("error", err))
+        except Exception:  # (an error that does not pickle: its text)
+            conn.send(("error", RuntimeError(f"{type(err).__name__}: {err}")))
+    finally:
+        conn.close()
+
+
+class ReadingProcess:
+    """:func:`frame_sets` of a recording, read by a process of its own, started at once (forked:
+    no start-up cost, the open recording inherited); it also fills ``recorded`` and hands the
+    reader the small topics it kept. Iterate it once; close it (or use it as a context manager)
+    to stop the process early.
+
+    Reading a bag is mostly Python (rosbags walks every record of every chunk) and holds the GIL
+    against the localizer's own Python; in another process it runs on the other core, and
+    collects the metrics' rows of the recorded topics while it waits for the consumer. Its CPU
+    time is the replay's too (``replay.cpu_s`` counts child processes). Not the default: the
+    hand-over of every image through a pipe and the fork's copy-on-write page faults cost about
+    0.2 CPU s per 20 s of the 12-camera recording, and on 2 shared cores it was slower than the
+    reading thread (measured 2026-11-23 at load 4, 12 cameras, 20 s: 1.47-1.55 s against
+    1.31-1.48 s a replay); it may pay on a machine with cores to spare.
+    """
+
+    def __init__(
+        self, reader: RecordingReader, camera_ids: list[str], namespaces: list[str], recorded: RecordedRows
+    ) -> None:
+        self.reader, self.recorded = reader, recorded
+        mp = multiprocessing.get_context("fork")
+        self._receive, send = mp.Pipe(duplex=False)
+        self._proc = mp.Process(
+            target=_read_frame_sets, args=(reader, camera_ids, namespaces, recorded, send), name="read"
+        )
+        self._proc.start()
+        send.close()
+
+    def __iter__(self) -> Iterator[FrameSet]:
+        receive, proc = self._receive, self._proc
+        try:
+            while True:
+                try:
+                    kind, value = receive.recv()
+                except EOFError:
+                    proc.join()
+                    raise RecordingInputError(
+                        "replay failed",
+                        str(self.reader.path),
+                        f"its reading process ended early (exit code {proc.exitcode})",
+                        "replay without --set reader=process",
+                    ) from None
+                if kind == "item":
+                    stamp_ns, cids, cmds = value
+                    yield stamp_ns, {c: receive.recv_bytes() for c in cids}, cmds
+                elif kind == "recorded":
+                    self.recorded.take(value)
+                elif kind == "small":
+                    if value:
+                        self.reader.adopt_small_topics(receive.recv_bytes())
+                elif kind == "error":
+                    raise value
+                else:
+                    return
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        self._receive.close()
+        if self._proc.exitcode is None:
+            self._proc.terminate()  # (stopped early: the reader may be blocked sending)
+        self._proc.join()
+
+    def __enter__(self) -> ReadingProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def image_camera_ids(reader: RecordingReader, config: dict[str, Any]) -> list[str]:
+    """The cameras whose images a replay reads: the run's cameras, in its order."""
+    recorded = sorted(
+        t.split("/")[1].removeprefix("camera_")
+        for t in reader.topics
+        if t.startswith("/camera_") and t.endswith(IMAGE_SUFFIX)
+    )
+    return [str(c) for c in (config.get("cameras") or {}).get("ids", recorded)]
+
+
 def replay_localizer(
     reader: RecordingReader,
     config: dict[str, Any],
     cameras: dict,
     params: LocalizerParams,
     consistency: CameraConsistency | None = None,
+    *,
+    reading: ReadingProcess | None = None,
+    recorded: RecordedRows | None = None,
 ) -> tuple[Localizer, dict[str, pl.DataFrame]]:
     """Run the localizer over the recording; returns it and per-agent estimate tables.
 
-    ``consistency`` (if given) gets every frame set's per-camera observations.
+    ``consistency`` (if given) gets every frame set's per-camera observations. ``reading``: the
+    recording's frame sets from a reading process already started (for at least the cameras
+    and agents of ``config``; it fills its own rows of the recorded topics); without it a thread
+    reads them, and fills ``recorded`` (if given) on the way.
     """
     mounts, _ = marker_mounts(config)
     camera_order = [str(c) for c in (config.get("cameras") or {}).get("ids", sorted(cameras))]
@@ -210,21 +353,35 @@ def replay_localizer(
             for cid, plan in planned
             if plan
         ]
+        # this thread searches too, from the last image back, each one no worker has started
+        # (a cancelled future is never run): no idle wait, fewer hand-overs between threads
+        own: dict[str, ImageSearch] = {}
+        for cid, plan, job in reversed(jobs):
+            if not job.cancel():
+                break
+            own[cid] = localizer.detect(cid, plan, jpeg=pending[cid])
         for cid, plan, job in jobs:
-            localizer.observe(pending_t, cid, plan, job.result())
+            localizer.observe(pending_t, cid, plan, own[cid] if cid in own else job.result())
         localizer.close_frame(pending_t)
         if consistency is not None:
             consistency.add(localizer.last_observations)
         control_until(pending_t, inclusive=True)
 
-    #   reader thread: bag -> (frame set, commands before the next one) --queue--> this thread:
-    #   plan -> search (worker threads) -> observe in camera order -> fuse -> control ticks
-    sets = frame_sets(reader, camera_order, list(rows))
-    with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1), thread_name_prefix="search") as pool:
-        for stamp_ns, jpegs, cmds in sets if os.environ.get("NOBG") else in_background(sets, depth=4):
+    #   reading process (or thread): bag -> (frame set, commands before the next one) --pipe-->
+    #   this thread: plan -> search (a worker thread and this one) -> observe in camera order ->
+    #   fuse -> control ticks
+    sets = (
+        reading
+        if reading is not None
+        else in_background(frame_sets(reader, camera_order, list(rows), recorded), depth=4)
+    )
+    workers = max(1, min(8, os.cpu_count() or 1) - 1)  # (and this thread)
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="search") as pool:
+        for stamp_ns, jpegs, cmds in sets:
             for t_ns, ns, v, w in cmds:
                 commands.setdefault(t_ns, []).append((ns, v, w))
-            if stamp_ns is not None:
+            # (a reading process may read cameras the localizer was not given: a fault)
+            if stamp_ns is not None and any(c in jpegs for c in camera_order):
                 flush_frame_set(stamp_ns, jpegs)
     control_until(duration_ns, inclusive=True)
     return localizer, {ns: status_table(est, status) for ns, (est, status) in rows.items()}
@@ -242,13 +399,38 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
             if k in ("method", "unobserved_timeout_s", "lost_timeout_s", "processing_delay_s", "bias_m")
         },
     )
+    read_in = str(ctx.options.get("reader", READERS[0]))
+    if read_in not in READERS:
+        raise ConfigError(
+            f"unknown reader {read_in!r}",
+            "replay --set reader",
+            f"known: {', '.join(READERS)}",
+            "use thread",
+        )
     wall0 = time.perf_counter()
     consistency = CameraConsistency()
-    localizer, tables = replay_localizer(ctx.reader, config, ctx.believed_cameras, params, consistency)
-    wall = time.perf_counter() - wall0
-    truth = ground_truth(ctx.reader)
     mounts, _ = marker_mounts(config)
     kinds = {ns: agent_type(a.get("type", "pallet_truck")) for ns, a in (config.get("agents") or {}).items()}
+    drives = [ns for ns, k in kinds.items() if k.drive == "diff"]
+    recorded = RecordedRows(
+        estimates_of=[m.namespace for m in mounts],
+        navigation_of=drives if ctx.options.get("navigation", True) else (),
+    )
+    in_process = read_in == "process" and sys.platform == "linux"
+    # the reading process starts before the cameras are known: it reads while they are built
+    with (
+        ReadingProcess(
+            ctx.reader, image_camera_ids(ctx.reader, config), [m.namespace for m in mounts], recorded
+        )
+        if in_process
+        else contextlib.nullcontext()
+    ) as reading:
+        localizer, tables = replay_localizer(
+            ctx.reader, config, ctx.believed_cameras, params, consistency, reading=reading, recorded=recorded
+        )
+    wall = time.perf_counter() - wall0
+    # the recording's own topics (ground truth, live estimates, navigation): read on the way
+    truth = recorded.truth_tables()
     visibility = {m.namespace: Visibility(ctx.cameras, kinds[m.namespace]) for m in mounts}
     metrics = localization_metrics(truth, tables, visibility)
     frames = [t.seconds for t in localizer.timings]
@@ -273,7 +455,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
             },
             orient="row",
         ).write_parquet(ctx.out_dir / "frame_timings.parquet")
-    live = estimates_from_recording(ctx.reader, [m.namespace for m in mounts])
+    live = recorded.estimate_tables()
     diffs = []
     for ns, table in tables.items():
         joined = table.join(live[ns], on="stamp_ns", how="inner", suffix="_live").filter(
@@ -294,9 +476,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     if frames_out:
         pl.concat(frames_out).write_parquet(ctx.out_dir / "estimates.parquet")
     if ctx.options.get("navigation", True):
-        metrics.update(
-            navigation_metrics(ctx.reader, truth, [ns for ns, k in kinds.items() if k.drive == "diff"])
-        )
+        metrics.update(navigation_metrics(recorded, truth, drives))
     return metrics
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import polars as pl
@@ -29,7 +30,7 @@ from ..geometry.camera import CameraModel
 from ..geometry.rotations import wrap_angle
 from ..gpss.markers import marker_corners_in_marker_frame
 from ..recording import schema
-from ..recording.reader import RecordingReader
+from ..recording.reader import Message, RecordingReader
 
 MIN_SIDE_PX = 10.0
 
@@ -53,37 +54,100 @@ def yaw_as_recorded(yaw_rad: float) -> float:
     return _yaw_xyzw(0.0, 0.0, float(np.sin(yaw_rad / 2)), float(np.cos(yaw_rad / 2)))
 
 
-def ground_truth(reader: RecordingReader) -> dict[str, pl.DataFrame]:
-    """map -> base_link of every agent from /ground_truth/poses."""
-    rows: dict[str, list[tuple]] = {}
-    for m in reader.messages([schema.GROUND_TRUTH_POSES]):
+class RecordedRows:
+    """What the metrics read from a recording's own topics (ground truth, the live estimates and
+    localization status, navigation status and collisions), as plain rows, collected message by
+    message: :func:`ground_truth`, :func:`estimates_from_recording` and
+    :func:`navigation_metrics` read through it, and a replay's reading process collects them
+    while it reads (plain rows pickle cheaply; its tables are built here).
+    """
+
+    def __init__(
+        self, *, truth: bool = True, estimates_of: Iterable[str] = (), navigation_of: Iterable[str] = ()
+    ) -> None:
+        self.truth: dict[str, list[tuple]] = {}
+        self.estimates: dict[str, tuple[list[tuple], list[tuple]]] = {}
+        self.navigation: dict[str, tuple[Any, int, bool]] = {}  # last status, collisions, in collision
+        self._handlers: dict[str, tuple[Any, ...]] = {}
+        if truth:
+            self._handlers[schema.GROUND_TRUTH_POSES] = (self._truth,)
+        for ns in estimates_of:
+            topics = schema.agent_topics(ns)
+            est, status = self.estimates[ns] = ([], [])
+            self._handlers[topics["pose_estimate"].name] = (self._estimate, est)
+            self._handlers[topics["localization"].name] = (self._status, status)
+        for ns in navigation_of:
+            topics = schema.agent_topics(ns)
+            self.navigation[ns] = (None, 0, False)
+            self._handlers[topics["navigation"].name] = (self._navigation, ns)
+            self._handlers[topics["collision"].name] = (self._collision, ns)
+
+    def rows(self) -> tuple[Any, ...]:
+        """The rows collected (plain data: to hand to another process, see :meth:`take`)."""
+        return self.truth, self.estimates, self.navigation
+
+    def take(self, rows: tuple[Any, ...]) -> None:
+        """Rows another collector of the same topics collected (its :meth:`rows`)."""
+        self.truth, self.estimates, self.navigation = rows
+
+    @property
+    def topics(self) -> list[str]:
+        return list(self._handlers)
+
+    def add(self, m: Message) -> None:
+        """One message (decoded) of one of :attr:`topics`, in log-time order."""
+        handler, *args = self._handlers[m.topic]
+        handler(m, *args)
+
+    def _truth(self, m: Message) -> None:
         for tf in m.msg.transforms:
             ns = tf.child_frame_id.split("/")[0]
             p = tf.transform.translation
-            rows.setdefault(ns, []).append((m.stamp_ns, p.x, p.y, _yaw(tf.transform.rotation)))
-    return {ns: pl.DataFrame(r, schema=POSE_SCHEMA, orient="row") for ns, r in rows.items()}
+            self.truth.setdefault(ns, []).append((m.stamp_ns, p.x, p.y, _yaw(tf.transform.rotation)))
+
+    @staticmethod
+    def _estimate(m: Message, rows: list[tuple]) -> None:
+        pose = m.msg.pose.pose
+        rows.append((m.stamp_ns, pose.position.x, pose.position.y, _yaw(pose.orientation)))
+
+    @staticmethod
+    def _status(m: Message, rows: list[tuple]) -> None:
+        rows.append((m.stamp_ns, m.msg.observed, m.msg.valid, m.msg.fix_age_s))
+
+    def _navigation(self, m: Message, ns: str) -> None:
+        _, hits, prev = self.navigation[ns]
+        status = m.msg
+        self.navigation[ns] = (
+            (int(status.goals_reached), int(status.goals_total), float(status.planned_length_m)),
+            hits,
+            prev,
+        )
+
+    def _collision(self, m: Message, ns: str) -> None:
+        last, hits, prev = self.navigation[ns]
+        hit = bool(m.msg.in_collision)
+        self.navigation[ns] = (last, hits + int(hit and not prev), hit)
+
+    def read(self, reader: RecordingReader) -> RecordedRows:
+        for m in reader.messages(self.topics):
+            self.add(m)
+        return self
+
+    def truth_tables(self) -> dict[str, pl.DataFrame]:
+        return {ns: pl.DataFrame(r, schema=POSE_SCHEMA, orient="row") for ns, r in self.truth.items()}
+
+    def estimate_tables(self) -> dict[str, pl.DataFrame]:
+        return {ns: status_table(est, status) for ns, (est, status) in self.estimates.items()}
+
+
+def ground_truth(reader: RecordingReader) -> dict[str, pl.DataFrame]:
+    """map -> base_link of every agent from /ground_truth/poses."""
+    return RecordedRows().read(reader).truth_tables()
 
 
 def estimates_from_recording(reader: RecordingReader, namespaces: Iterable[str]) -> dict[str, pl.DataFrame]:
     """Pose estimates joined with localization status, per agent: stamp, x, y, yaw, observed, valid, age."""
-    out = {}
-    for ns in namespaces:
-        topics = schema.agent_topics(ns)
-        est = [
-            (
-                m.stamp_ns,
-                m.msg.pose.pose.position.x,
-                m.msg.pose.pose.position.y,
-                _yaw(m.msg.pose.pose.orientation),
-            )
-            for m in reader.messages([topics["pose_estimate"].name])
-        ]
-        status = [
-            (m.stamp_ns, m.msg.observed, m.msg.valid, m.msg.fix_age_s)
-            for m in reader.messages([topics["localization"].name])
-        ]
-        out[ns] = status_table(est, status)
-    return out
+    return RecordedRows(truth=False, estimates_of=namespaces).read(reader).estimate_tables()
 
 
 def status_table(estimates: list[tuple], status: list[tuple]) -> pl.DataFrame:
@@ -189,23 +253,21 @@ def localization_metrics(
 
 
 def navigation_metrics(
-    reader: RecordingReader, truth: dict[str, pl.DataFrame], namespaces: Iterable[str]
+    reader: RecordingReader | RecordedRows, truth: dict[str, pl.DataFrame], namespaces: Iterable[str]
 ) -> dict[str, float]:
-    """``navigation.*`` from the recorded navigation status, collision sensor and ground truth."""
+    """``navigation.*`` from the recorded navigation status, collision sensor and ground truth
+    (read from ``reader``, or already collected)."""
+    namespaces = list(namespaces)
+    rows = (
+        reader
+        if isinstance(reader, RecordedRows)
+        else RecordedRows(truth=False, navigation_of=namespaces).read(reader)
+    )
     out: dict[str, float] = {}
     reached = total = collisions = 0
     ratios = []
     for ns in namespaces:
-        topics = schema.agent_topics(ns)
-        last = None
-        for m in reader.messages([topics["navigation"].name]):
-            last = m.msg
-        hits = 0
-        prev = False
-        for m in reader.messages([topics["collision"].name]):
-            if m.msg.in_collision and not prev:
-                hits += 1
-            prev = m.msg.in_collision
+        last, hits, _ = rows.navigation[ns]
         gt = truth.get(ns)
         driven = (
             float(np.sum(np.hypot(np.diff(gt["x"].to_numpy()), np.diff(gt["y"].to_numpy()))))
@@ -213,9 +275,7 @@ def navigation_metrics(
             else 0.0
         )
         prefix = f"navigation.{ns}."
-        g_reached = int(last.goals_reached) if last is not None else 0
-        g_total = int(last.goals_total) if last is not None else 0
-        planned = float(last.planned_length_m) if last is not None else 0.0
+        g_reached, g_total, planned = last if last is not None else (0, 0, 0.0)
         out[prefix + "goals_reached"] = float(g_reached)
         out[prefix + "goals_total"] = float(g_total)
         out[prefix + "collisions"] = float(hits)

@@ -39,7 +39,9 @@ def camera_from_messages(info: Any, map_from_camera: Any, camera_id: str) -> Cam
 
 def cameras_in_recording(reader: RecordingReader) -> dict[str, CameraModel]:
     """Every camera of a recording, from its first camera_info and the static transforms."""
-    tf_static = reader.first(schema.TF_STATIC)
+    infos = [t for t in sorted(reader.topics) if t.startswith("/camera_") and t.endswith("/camera_info")]
+    first = reader.firsts([schema.TF_STATIC, *infos])  # (one pass)
+    tf_static = first.get(schema.TF_STATIC)
     if tf_static is None:
         raise RecordingInputError(
             "recording lacks /tf_static",
@@ -49,11 +51,9 @@ def cameras_in_recording(reader: RecordingReader) -> dict[str, CameraModel]:
         )
     frames = {t.child_frame_id: t.transform for t in tf_static.msg.transforms}
     out: dict[str, CameraModel] = {}
-    for topic in sorted(reader.topics):
-        if not (topic.startswith("/camera_") and topic.endswith("/camera_info")):
-            continue
+    for topic in infos:
         cid = topic.split("/")[1].removeprefix("camera_")
-        info = reader.first(topic)
+        info = first.get(topic)
         frame = schema.camera_frame(cid)
         if info is None or frame not in frames:
             continue

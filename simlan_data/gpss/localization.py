@@ -31,6 +31,7 @@ from ..constants import NS_PER_S
 from ..geometry.camera import CameraModel
 from ..geometry.rotations import wrap_angle
 from ..geometry.transforms import Transform
+from .jpeg_regions import decode_gray_regions
 from .markers import (
     POSE_METHODS,
     Detection,
@@ -109,6 +110,7 @@ class UnicycleEKF:
 
     def __init__(self, accel_noise: float, yaw_accel_noise: float) -> None:
         self.q = np.array([accel_noise**2, yaw_accel_noise**2])
+        self._Q = np.diag(self.q)
         self.x = np.zeros(5)
         self.P = np.eye(5)
         self.t_ns: int | None = None
@@ -128,15 +130,17 @@ class UnicycleEKF:
     def _propagate(
         self, x: NDArray[np.float64], P: NDArray[np.float64], dt: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        th, v = x[2], x[3]
+        # (the same floating-point operations as _move and the Jacobians written out, each sine
+        # and cosine computed once: replays of older recordings still equal their live runs)
+        px, py, th, v, w = x
+        s, c = np.sin(th), np.cos(th)
         F = np.eye(5)
-        F[0, 2], F[0, 3] = -v * np.sin(th) * dt, np.cos(th) * dt
-        F[1, 2], F[1, 3] = v * np.cos(th) * dt, np.sin(th) * dt
+        F[0, 2], F[0, 3] = -v * s * dt, c * dt
+        F[1, 2], F[1, 3] = v * c * dt, s * dt
         F[2, 4] = dt
-        G = np.array(
-            [[0.5 * np.cos(th) * dt**2, 0], [0.5 * np.sin(th) * dt**2, 0], [0, 0.5 * dt**2], [dt, 0], [0, dt]]
-        )
-        return self._move(x, dt), F @ P @ F.T + G @ np.diag(self.q) @ G.T
+        G = np.array([[0.5 * c * dt**2, 0], [0.5 * s * dt**2, 0], [0, 0.5 * dt**2], [dt, 0], [0, dt]])
+        moved = np.array([px + v * c * dt, py + v * s * dt, th + w * dt, v, w])
+        return moved, F @ P @ F.T + G @ self._Q @ G.T
 
     def _predicted(self, t_ns: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         assert self.t_ns is not None
@@ -376,6 +380,11 @@ class Localizer:
         cached = self._full_cache.get(key) if key is not None else None
         if cached is not None:
             return ImageSearch(cached[0], cached[1], time.perf_counter() - t0)
+        if gray is None and plan != "full":
+            # only the regions searched: same pixels as a whole decode (jpeg_regions), or None
+            # for a JPEG without restart markers
+            assert data is not None
+            gray = decode_gray_regions(data, plan)  # type: ignore[arg-type]
         if gray is None:
             assert data is not None
             gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)

@@ -30,6 +30,21 @@ DEPTH_MAX_M = 65.535
 PNG_FILTER = [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_UP]
 
 
+# Restart markers every few MCUs (16x16 pixel blocks at OpenCV's 4:2:0 chroma) let a reader
+# decode only the image regions it needs (simlan_data/gpss/jpeg_regions.py: the localizer
+# searches small regions around predicted markers). Same pixels; measured on rendered 960x540
+# frames at quality 85: +2.5 % bytes with 4 MCUs (64 px), +5 % with 2, +10 % with 1.
+JPEG_MCU_PX = 16
+JPEG_RESTART_MCUS = 4
+
+
+def jpeg_restart_interval(width: int) -> int:
+    """Restart interval (MCUs) for an image ``width`` pixels wide: one that divides its MCU row
+    (the regions a reader can cut are then rectangles), at most JPEG_RESTART_MCUS."""
+    mcus = -(-width // JPEG_MCU_PX)
+    return next(n for n in (JPEG_RESTART_MCUS, 2, 1) if mcus % n == 0)
+
+
 def png_params(level: int) -> list[int]:
     return [cv2.IMWRITE_PNG_COMPRESSION, level, *PNG_FILTER]
 
@@ -41,7 +56,9 @@ def encode_rgb(rgb: NDArray[np.uint8], encoding: str, *, jpeg_quality: int = 90)
     """Encode an RGB image: returns (CompressedImage.format, data)."""
     bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
     if encoding == "jpeg":
-        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
+        params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)]
+        params += [cv2.IMWRITE_JPEG_RST_INTERVAL, jpeg_restart_interval(bgr.shape[1])]
+        ok, buf = cv2.imencode(".jpg", bgr, params)
         fmt = JPEG_FORMAT
     elif encoding == "png":
         ok, buf = cv2.imencode(".png", bgr, png_params(1))

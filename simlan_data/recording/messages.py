@@ -79,6 +79,36 @@ def restamp(cdr: bytes, stamp_ns: int) -> bytes:
     return b"".join((cdr[:4], _STAMP.pack(sec, nanosec), cdr[12:]))
 
 
+_U32 = struct.Struct("<I")
+
+
+def compressed_image_data(cdr: bytes | memoryview) -> memoryview | None:
+    """The ``data`` field of a serialized sensor_msgs/CompressedImage, without deserializing it
+    (no copy of the image bytes; a replay skips most images it reads); None if ``cdr`` is not
+    little-endian CDR of that layout (then deserialize it the ordinary way).
+
+    Little-endian CDR after the 4-byte encapsulation header: header.stamp (8 bytes), then the
+    strings frame_id and format and the uint8 sequence data, each a uint32 length (aligned to 4
+    from the body's start) and its bytes.
+    """
+    view = memoryview(cdr).cast("B")
+    if len(view) < 12 or view[:4] != _CDR_LE:
+        return None
+    pos = 12  # encapsulation (4) + stamp (8)
+    for _ in range(3):  # frame_id, format, data
+        pos += -(pos - 4) % 4
+        if pos + 4 > len(view):
+            return None
+        (n,) = _U32.unpack_from(view, pos)
+        pos += 4
+        if pos + n > len(view):
+            return None
+        pos += n
+    if pos + -(pos - 4) % 4 < len(view) - 3:  # something follows: not this layout
+        return None
+    return view[pos - n : pos]
+
+
 def header(stamp_ns: int, frame_id: str) -> Any:
     return Header(stamp=time_msg(stamp_ns), frame_id=frame_id)
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import os
+import pickle
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -100,6 +102,7 @@ class RecordingReader:
         if not all(isinstance(n, int) and not isinstance(n, bool) for n in counts):
             raise _bad(p, "metadata.yaml holds a message count or time that is not an integer")
         self._small: list[tuple[Any, int, bytes]] | None = None  # see STREAMED_TYPES
+        self._small_pickled: bytes | None = None  # see adopt_small_topics
         self._register_bag_types()
         self.format_version = self.custom_data.get(METADATA_KEY_FORMAT, "")
         if check_format:
@@ -214,19 +217,8 @@ class RecordingReader:
             return
         try:
             for conn, stamp, data in self._raw_messages(conns, start_ns, stop_ns):
-                if raw:
-                    yield Message(conn.topic, int(stamp), conn.msgtype, data)
-                    continue
-                try:
-                    msg = self._store.deserialize_cdr(data, conn.msgtype)
-                except Exception as err:
-                    raise RecordingInputError(
-                        "message undecodable",
-                        f"{self.path} topic {conn.topic} at {stamp} ns",
-                        f"{type(err).__name__}: {_first(err)}",
-                        f"the recording is corrupt; `python -m simlan_data.recover {self.path}` keeps its intact chunks",
-                    ) from err
-                yield Message(conn.topic, int(stamp), conn.msgtype, msg)
+                message = Message(conn.topic, int(stamp), conn.msgtype, data)
+                yield message if raw else self.deserialize(message)
         except RecordingInputError:
             raise
         except Exception as err:
@@ -235,10 +227,25 @@ class RecordingReader:
                 f"{type(err).__name__} while reading messages: {_first(err)}",
             ) from err
 
+    def deserialize(self, raw: Message) -> Message:
+        """A message read with ``raw=True``, decoded (for readers that decode only some)."""
+        try:
+            msg = self._store.deserialize_cdr(raw.msg, raw.msgtype)
+        except Exception as err:
+            raise RecordingInputError(
+                "message undecodable",
+                f"{self.path} topic {raw.topic} at {raw.stamp_ns} ns",
+                f"{type(err).__name__}: {_first(err)}",
+                f"the recording is corrupt; `python -m simlan_data.recover {self.path}` keeps its intact chunks",
+            ) from err
+        return Message(raw.topic, raw.stamp_ns, raw.msgtype, msg)
+
     def _raw_messages(
         self, conns: list[Any], start_ns: int | None, stop_ns: int | None, *, cache: bool = True
     ) -> Iterator[tuple[Any, int, bytes]]:
         """(connection, log time, CDR bytes) in log-time order; small topics from the cache."""
+        if self._small_pickled is not None:
+            self._unpickle_small()
         small = [c for c in self._reader.connections if c.msgtype not in STREAMED_TYPES]
         fits = sum(c.msgcount for c in small) <= SMALL_TOPICS_CACHE_MAX_MESSAGES
         cacheable = fits and all(c.msgtype not in STREAMED_TYPES for c in conns)
@@ -260,6 +267,47 @@ class RecordingReader:
         for conn, stamp, data in self._small:
             if conn.id in ids and lo <= stamp < hi:
                 yield conn, stamp, data
+
+    def detach_after_fork(self) -> None:
+        """In a forked child process: give the bag files their own file offsets, so that
+        reading here cannot move the parent's (a fork shares open file descriptions)."""
+        storages = getattr(self._reader.storage, "storages", None)
+        if not storages:
+            raise RuntimeError("unknown rosbags reader layout")
+        for storage in storages:
+            bio, path = getattr(storage, "bio", None), getattr(storage, "path", None)
+            if bio is None or path is None:
+                raise RuntimeError("unknown rosbags reader layout")
+            fd = bio.fileno()
+            offset = os.lseek(fd, 0, os.SEEK_CUR)
+            own = os.open(path, os.O_RDONLY)
+            os.dup2(own, fd)
+            os.close(own)
+            os.lseek(fd, offset, os.SEEK_SET)
+
+    def small_topics(self) -> bytes | None:
+        """The small topics' raw messages a whole pass over images kept (see STREAMED_TYPES),
+        pickled, or None if no such pass has run: for :meth:`adopt_small_topics` in another
+        process."""
+        if self._small is None:
+            return None
+        return pickle.dumps([(conn.id, int(stamp), bytes(data)) for conn, stamp, data in self._small])
+
+    def adopt_small_topics(self, pickled: bytes) -> None:
+        """Take the small topics another reader of the same recording kept (its
+        :meth:`small_topics`), so that reading them here costs no pass over the bag; unpickled
+        only when first read."""
+        self._small_pickled = pickled
+
+    def _unpickle_small(self) -> None:
+        pickled, self._small_pickled = self._small_pickled, None
+        if self._small is not None or pickled is None:
+            return
+        rows = pickle.loads(pickled)  # (our own reading process's, see small_topics)
+        by_id = {c.id: c for c in self._reader.connections}
+        if any(conn_id not in by_id for conn_id, _, _ in rows):
+            raise ValueError("small topics of another recording")
+        self._small = [(by_id[conn_id], stamp, data) for conn_id, stamp, data in rows]
 
     def _stream_filling_cache(self, conns: list[Any], small: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
         """``conns``' messages from a pass that reads the small topics too and caches them."""
@@ -290,6 +338,22 @@ class RecordingReader:
                 ) from err
             return Message(conn.topic, int(stamp), conn.msgtype, msg)
         return None
+
+    def firsts(self, topics: Iterable[str]) -> dict[str, Message]:
+        """The first message of each of ``topics`` that has one, from one pass that stops when
+        it has them all (:meth:`first` of each would read the start of the bag again each time)."""
+        wanted = set(topics)
+        conns = [c for c in self._reader.connections if c.topic in wanted]
+        present = {c.topic for c in conns}
+        out: dict[str, Message] = {}
+        if not conns:
+            return out
+        for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
+            if conn.topic not in out:
+                out[conn.topic] = self.deserialize(Message(conn.topic, int(stamp), conn.msgtype, data))
+                if len(out) == len(present):
+                    break
+        return out
 
     # ----------------------------------------------------------------------------- summary
     def summary(self) -> str:
