@@ -61,7 +61,7 @@ def test_fit_puts_the_skeleton_on_the_landmarks_from_the_mean_pose(trained: tupl
     rig = _rig(trained[0])
     q_true = S.sample_joints(np.random.default_rng(5), 40)
     lm = _views(rig, q_true, noise_px=0.0)
-    lo, hi = F.box(0.8)
+    lo, hi = S.sampling_box(0.8)
     start = np.tile((lo + hi) / 2, (len(q_true), 1))  # the middle of the sampling box
     refiner = F.Refiner(rig, np.full(S.NUM_JOINTS, 0.5), F.FitParams(iterations=40, curve_median=False))
     q = refiner(lm, start)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from .skeleton import JOINT_NAMES, LOWER, UPPER, sample_joints
+from .skeleton import JOINT_NAMES, sample_joints, sampling_box
 
 
 def ambiguous_groups() -> list[tuple[list[str], bool]]:
@@ -80,7 +80,7 @@ def curve_medians(
     the limits keeps its angles.
     """
     q = np.array(q, dtype=np.float64, copy=True)
-    lo, hi = limit_scale * LOWER, limit_scale * UPPER
+    lo, hi = sampling_box(limit_scale)
     index = {name: i for i, name in enumerate(JOINT_NAMES)}
     for names, leg in ambiguous_groups():
         idx = [index[nm] for nm in names]

@@ -5,8 +5,8 @@ refines it the way model-based human pose fitting does (SMPLify, SPIN's "regress
 optimisation"): it searches the joint vector whose landmarks, placed by the skeleton's forward
 kinematics and projected by each calibrated camera, land on the pixels the estimator reported,
 weighted by how much the estimator trusts each one (``noise_px`` for a landmark it sees,
-``hidden_noise_px`` for one it guesses), within the sampling limits, with a weak pull towards
-``q0`` for what the images cannot tell.
+``hidden_noise_px`` for one it guesses), within the sampling limits, pulled towards ``q0`` per
+joint as far as the learned model's own errors say, for what the images cannot tell.
 
 landmarks (N, C, 33, 4) + cameras --> undistorted image points --> damped Gauss-Newton over q
 (analytic Jacobian: a revolute joint moves a point at ``axis x (point - joint origin)``) -->
@@ -25,13 +25,13 @@ from numpy.typing import NDArray
 from .ambiguity import curve_medians
 from .features import Rig
 from .skeleton import (
-    LOWER,
     NUM_JOINTS,
-    UPPER,
     _chain,
     _landmark_links,
     forward_kinematics,
     landmark_positions,
+    landmarks_of_links,
+    sampling_box,
 )
 
 F64 = NDArray[np.float64]
@@ -43,8 +43,6 @@ class FitParams:
 
     noise_px: float = 1.0  # sigma of a landmark the estimator marks visible
     hidden_noise_px: float = 8.0  # ... of one it marks hidden (a guess)
-    prior_rad: float = 0.5  # sigma of the pull towards the learned estimate (refine(); the
-    # Refiner uses the learned model's own per-joint validation error instead)
     iterations: int = 15
     starts: int = 4  # 1 + random restarts of the arms for a fit whose residual stays too large
     restart_chi2: float = 1.5  # ... "too large": mean squared whitened residual above this
@@ -91,21 +89,10 @@ def _joint_axes() -> F64:
     return out
 
 
-def box(limit_scale: float) -> tuple[F64, F64]:
-    """The sampling box of :func:`skeleton.sample_joints` (scaled about zero, or the middle)."""
-    straddle = (LOWER <= 0) & (UPPER >= 0)
-    mid = (LOWER + UPPER) / 2
-    lo = np.where(straddle, LOWER * limit_scale, mid + (LOWER - mid) * limit_scale)
-    hi = np.where(straddle, UPPER * limit_scale, mid + (UPPER - mid) * limit_scale)
-    return lo, hi
-
-
 def _landmarks_base(q: F64) -> tuple[F64, F64]:
     """Landmarks (N, 33, 3) in the base frame and every link's pose (N, links, 4, 4)."""
     T = forward_kinematics(q)
-    links, offsets = _landmark_links()
-    at = T[:, links]
-    return np.einsum("nkij,kj->nki", at[..., :3, :3], offsets) + at[..., :3, 3], T
+    return landmarks_of_links(T), T
 
 
 def _point_jacobian(pts: F64, T: F64) -> F64:
@@ -173,21 +160,6 @@ def _residuals(
     return res.reshape(n, -1), (H, g)
 
 
-def refine(
-    landmarks: NDArray[np.float32], rig: Rig, q0: F64, params: FitParams | None = None, *, batch: int = 512
-) -> F64:
-    """Refined joint targets (N, 47) for landmarks (N, C, 33, 4) of ``rig``'s cameras, from ``q0``."""
-    params = params or FitParams()
-    q0 = np.atleast_2d(np.asarray(q0, dtype=np.float64))
-    landmarks = np.asarray(landmarks, dtype=np.float32)
-    out = np.empty_like(q0)
-    for s in range(0, len(q0), batch):
-        out[s : s + batch] = _refine_batch(landmarks[s : s + batch], rig, q0[s : s + batch], params)
-    if params.curve_median:
-        out = curve_medians(out, limit_scale=params.limit_scale)
-    return out
-
-
 def fit_from(
     landmarks: NDArray[np.float32],
     rig: Rig,
@@ -202,7 +174,7 @@ def fit_from(
     cam_from_base = np.stack(
         [np.linalg.inv(base_from_world @ cam.world_from_camera.matrix()) for cam in rig.cameras]
     )
-    lo, hi = box(params.limit_scale)
+    lo, hi = sampling_box(params.limit_scale)
     w_prior = np.broadcast_to(1.0 / np.asarray(prior_sigma, dtype=np.float64) ** 2, (NUM_JOINTS,))
     q = np.clip(start, lo, hi)
     mu = np.full(len(q), 1e-2)
@@ -228,10 +200,6 @@ def fit_from(
         mu = np.where(better, np.maximum(mu / 3.0, 1e-6), np.minimum(mu * 4.0, 1e6))
         r, normal = _residuals(q, obs, weights, focal, cam_from_base, normal=True)
     return q, c
-
-
-def _refine_batch(landmarks: NDArray[np.float32], rig: Rig, q0: F64, params: FitParams) -> F64:
-    return fit_from(landmarks, rig, q0, q0, params.prior_rad, params)[0]
 
 
 def pixel_noise(landmarks: NDArray[np.float32], q: F64, rig: Rig) -> tuple[float, float]:
@@ -290,7 +258,7 @@ class Refiner:
 
     def _arm_starts(self) -> F64:
         """(starts - 1, arm joints): where the restarts put the arms, drawn once from the seed."""
-        lo, hi = box(self.params.limit_scale)
+        lo, hi = sampling_box(self.params.limit_scale)
         arms = _arm_joints()
         rng = np.random.default_rng(self.params.seed)
         return rng.uniform(lo[arms], hi[arms], size=(self.params.starts - 1, len(arms)))

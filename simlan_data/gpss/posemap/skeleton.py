@@ -413,12 +413,18 @@ def sample_joints(rng: np.random.Generator, n: int, *, limit_scale: float = 0.8)
     Scaling is about zero (SIMLAN's ``limit * 0.8``); a range that does not contain zero (none
     here) would be scaled about its middle instead.
     """
-    lo, hi = LOWER * limit_scale, UPPER * limit_scale
+    lo, hi = sampling_box(limit_scale)
+    return rng.uniform(lo, hi, size=(n, NUM_JOINTS))
+
+
+def sampling_box(limit_scale: float = 0.8) -> tuple[FloatArray, FloatArray]:
+    """(lower, upper) of :func:`sample_joints`: the limits scaled about zero, or about the middle
+    for a range that does not contain zero."""
     straddle = (LOWER <= 0) & (UPPER >= 0)
     mid = (LOWER + UPPER) / 2
-    lo = np.where(straddle, lo, mid + (LOWER - mid) * limit_scale)
-    hi = np.where(straddle, hi, mid + (UPPER - mid) * limit_scale)
-    return rng.uniform(lo, hi, size=(n, NUM_JOINTS))
+    lo = np.where(straddle, LOWER * limit_scale, mid + (LOWER - mid) * limit_scale)
+    hi = np.where(straddle, UPPER * limit_scale, mid + (UPPER - mid) * limit_scale)
+    return lo, hi
 
 
 # ------------------------------------------------------------------------------ forward kinematics
@@ -491,7 +497,11 @@ def _landmark_links() -> tuple[NDArray[np.int64], FloatArray]:
 
 def landmark_positions(q: FloatArray, world_from_base: FloatArray | None = None) -> FloatArray:
     """World positions (N, 33, 3) of the 33 landmarks for joint vectors q (N, 47)."""
-    T = forward_kinematics(q, world_from_base)
+    return landmarks_of_links(forward_kinematics(q, world_from_base))
+
+
+def landmarks_of_links(T: FloatArray) -> FloatArray:
+    """Positions (N, 33, 3) of the 33 landmarks, given every link's pose T (N, links, 4, 4)."""
     links, offsets = _landmark_links()
     at = T[:, links]  # (N, 33, 4, 4)
     return np.einsum("nkij,kj->nki", at[..., :3, :3], offsets) + at[..., :3, 3]
