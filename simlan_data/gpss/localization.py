@@ -122,16 +122,11 @@ class UnicycleEKF:
             while len(self.commands) >= 2 and self.commands[1][0] <= self.t_ns:
                 self.commands.pop(0)
 
-    @staticmethod
-    def _move(x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-        px, py, th, v, w = x
-        return np.array([px + v * np.cos(th) * dt, py + v * np.sin(th) * dt, th + w * dt, v, w])
-
     def _propagate(
         self, x: NDArray[np.float64], P: NDArray[np.float64], dt: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        # (the same floating-point operations as _move and the Jacobians written out, each sine
-        # and cosine computed once: replays of older recordings still equal their live runs)
+        # the unicycle moved by dt and its Jacobians, each sine and cosine computed once (the same
+        # floating-point operations as before: replays of older recordings equal their live runs)
         px, py, th, v, w = x
         s, c = np.sin(th), np.cos(th)
         F = np.eye(5)
