@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # this checkout's simlan_data
 from common import REPO, machine, run_cli, table
 from simlan_data.gpss.posemap.ambiguity import ambiguity_floor
-from simlan_data.gpss.posemap.dataset import read_dataset, split_of
+from simlan_data.gpss.posemap.dataset import PoseDataset, read_dataset, split_of
 from simlan_data.gpss.posemap.fit import Refiner
 from simlan_data.gpss.posemap.metrics import evaluate
 from simlan_data.gpss.posemap.training import TrainedMapper, rig_of
@@ -113,14 +113,20 @@ def train(workdir: Path, data: str, name: str, overrides: list[str], extra: list
     return json.loads((run / "metrics.json").read_text())
 
 
-def transfer(model_run: Path, dataset_dir: Path) -> dict:
-    """A model trained on projection landmarks, scored on MediaPipe's landmarks of bodies it never
-    trained on (the samples outside its training split; same seed, same bodies): SIMLAN's claim
-    that the estimator behaves alike on simulated and real images, tested from the other side."""
+def model_and_split(model_run: Path, dataset_dir: Path) -> tuple[TrainedMapper, PoseDataset, np.ndarray]:
+    """A trained model, a dataset in its cameras' order, and the model's split of that dataset."""
     mapper = TrainedMapper(str(model_run))
     data = read_dataset(str(dataset_dir)).select_cameras(mapper.cameras)
     info = mapper.info["split"]
     split = split_of(data.sample_ids, val_fraction=info["val_fraction"], test_fraction=info["test_fraction"])
+    return mapper, data, split
+
+
+def transfer(model_run: Path, dataset_dir: Path) -> dict:
+    """A model trained on projection landmarks, scored on MediaPipe's landmarks of bodies it never
+    trained on (the samples outside its training split; same seed, same bodies): SIMLAN's claim
+    that the estimator behaves alike on simulated and real images, tested from the other side."""
+    mapper, data, split = model_and_split(model_run, dataset_dir)
     unseen = split != "train"
     out = evaluate(
         mapper.predict(data.landmarks[unseen]), data.joints[unseen], data.joints[~unseen].mean(axis=0)
@@ -132,10 +138,7 @@ def transfer(model_run: Path, dataset_dir: Path) -> dict:
 def fit_bound(model_run: Path, dataset_dir: Path, n: int = 2000) -> dict:
     """The fit with the truth as its start and prior (the learned model's per-joint sigma): how
     far the landmarks alone leave the joints, i.e. roughly the best any estimate can do here."""
-    mapper = TrainedMapper(str(model_run))
-    data = read_dataset(str(dataset_dir)).select_cameras(mapper.cameras)
-    info = mapper.info["split"]
-    split = split_of(data.sample_ids, val_fraction=info["val_fraction"], test_fraction=info["test_fraction"])
+    mapper, data, split = model_and_split(model_run, dataset_dir)
     te = np.flatnonzero(split == "test")[:n]
     refiner = Refiner.from_dict(mapper.info["refine"], rig_of(mapper.spec))
     y = data.joints[te]
