@@ -59,6 +59,29 @@ def _curve(a: NDArray[np.float64], values: NDArray[np.float64], leg: bool) -> ND
     return np.concatenate([free, euler], axis=2) if leg else np.concatenate([euler, free], axis=2)
 
 
+def curve_tangents(q: NDArray[np.float64], h: float = 1e-6) -> NDArray[np.float64]:
+    """(N, 47, 4): per ambiguous group, the direction in joint space along which the landmarks
+    do not change at ``q`` (the curve's tangent, per unit of its free angle; zero elsewhere)."""
+    q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+    out = np.zeros((*q.shape, 4))
+    index = {name: i for i, name in enumerate(JOINT_NAMES)}
+    for k, (names, leg) in enumerate(ambiguous_groups()):
+        idx = [index[nm] for nm in names]
+        a = q[:, idx]
+        ends = []
+        for v in (a[:, 0 if leg else 3] - h, a[:, 0 if leg else 3] + h):
+            if leg:  # Rz(v) Rxyz(ankle) = Rz(knee) Rxyz(ankle as given)
+                R = Rotation.from_euler("Z", a[:, :1]) * Rotation.from_euler("XYZ", a[:, 1:])
+                ankle = (Rotation.from_euler("Z", -v[:, None]) * R).as_euler("XYZ")
+                ends.append(np.concatenate([v[:, None], ankle], axis=1))
+            else:  # Rxyz(shoulder) Ry(v) = Rxyz(shoulder as given) Ry(elbow)
+                R = Rotation.from_euler("XYZ", a[:, :3]) * Rotation.from_euler("Y", a[:, 3:])
+                shoulder = (R * Rotation.from_euler("Y", -v[:, None])).as_euler("XYZ")
+                ends.append(np.concatenate([shoulder, v[:, None]], axis=1))
+        out[:, idx, k] = (ends[1] - ends[0]) / (2 * h)
+    return out
+
+
 def _weighted_median(values: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
     """Per row and column of ``values`` (N, G, K), the median along G under ``weights`` (N, G)."""
     order = np.argsort(values, axis=1)
