@@ -32,7 +32,7 @@ WALL_CLOCK_METRICS = (
     "sim.main_thread_cpu_s",
 )
 # the two runs' /simlan/config texts differ (thread counts), so their zstd chunks may differ in size
-CONFIG_DEPENDENT_METRICS = ("recording.bytes",)
+CONFIG_DEPENDENT_METRICS = ("recording.bytes", "job.encode_threads", "job.gl_threads")  # the knobs themselves
 
 
 @pytest.fixture(scope="module")

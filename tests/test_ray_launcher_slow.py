@@ -105,6 +105,7 @@ def test_two_job_sweep_on_a_local_ray_cluster(ray_cluster: str, tmp_path: Path) 
     assert table["override.seed"].to_list() == [0, 1]
     assert table["status"].to_list() == ["ok", "ok"]
     assert table["job.opencv_threads"].to_list() == [1.0, 1.0]  # one core per Ray task
+    assert table["job.encode_threads"].to_list() == [0.0, 0.0]  # ... and no encoder threads
     assert all(frames > 0 for frames in table["sim.camera_frames"].to_list())
     for job in ("0", "1"):
         assert (sweep / job / "recording" / "metadata.yaml").is_file()

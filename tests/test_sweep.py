@@ -141,6 +141,23 @@ def test_parallel_launchers_give_each_job_its_share_of_the_cores() -> None:
     assert share(_hydra_cfg(RunMode.RUN, {"_target_": joblib, "n_jobs": -1}), cpu_count=2) == 0
 
 
+def test_a_job_with_one_core_runs_no_helper_threads(monkeypatch: pytest.MonkeyPatch) -> None:
+    """One core per job (joblib on two cores, a Ray task): encoding on the simulation thread and
+    Mesa rasterizing inline, unless the user set either; more cores or the basic launcher: as is."""
+    from simlan_data.run import single_core_job
+
+    monkeypatch.delenv("LP_NUM_THREADS", raising=False)
+    cfg = compose_config()
+    assert not single_core_job(cfg, 0, []) and not single_core_job(cfg, 2, [])
+    assert cfg.recording.encode_threads == 2 and "LP_NUM_THREADS" not in os.environ
+    assert single_core_job(cfg, 1, ["cameras.count=3"])
+    assert cfg.recording.encode_threads == 0 and os.environ["LP_NUM_THREADS"] == "0"
+    monkeypatch.delenv("LP_NUM_THREADS")
+    cfg = compose_config("recording.encode_threads=3")
+    single_core_job(cfg, 1, ["recording.encode_threads=3", "render.software_gl_threads=2"])
+    assert cfg.recording.encode_threads == 3 and "LP_NUM_THREADS" not in os.environ
+
+
 @pytest.mark.slow
 def test_rtf_experiment_through_the_joblib_launcher(tmp_path: Path) -> None:
     """The issue's sweep, tiny: two jobs at a time on both cores, one OpenCV thread each, each
@@ -168,6 +185,11 @@ def test_rtf_experiment_through_the_joblib_launcher(tmp_path: Path) -> None:
         table["job.opencv_threads"].to_list()
         == [max(1, (os.cpu_count() or 1) // min(2, os.cpu_count() or 1))] * 2
     )
+    # on two cores each job has one: no rasterizer or encoder threads of its own
+    single = max(1, (os.cpu_count() or 1) // min(2, os.cpu_count() or 1)) == 1
+    assert table["job.encode_threads"].to_list() == ([0.0] * 2 if single else [2.0] * 2)
+    if single and "LP_NUM_THREADS" not in os.environ:
+        assert table["job.gl_threads"].to_list() == [0.0, 0.0]
     assert (sweep / "rtf_table.md").is_file() and (sweep / "rtf.png").is_file()
     for job in ("0", "1"):
         assert (sweep / job / "recording" / "metadata.yaml").is_file()
