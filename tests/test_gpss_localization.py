@@ -261,3 +261,70 @@ def test_background_reading_hands_over_items_in_order_and_raises_its_errors() ->
     assert next(items) == 0
     items.close()  # the consumer stops early: the reading thread ends too
     assert threading.active_count() == before
+
+
+def _reference_rois(loc: Localizer, t_ns: int, cid: str) -> list[tuple[int, int, int, int]]:
+    """The regions one camera is planned to search, computed the plain way: each predicted
+    marker's corners through ``CameraModel.project`` (OpenCV's distortion), one at a time."""
+    from simlan_data.gpss.markers import marker_corners_in_marker_frame
+
+    cam = loc.cameras[cid]
+    rois = []
+    for mount, P, marker in loc._tick_predictions(t_ns).tracks:
+        uv, ok = cam.project(marker.apply(marker_corners_in_marker_frame(mount.size_m)))
+        if not ok.all():
+            continue
+        rng = float(np.linalg.norm(marker.translation - cam.position))
+        sigma_m = float(np.sqrt(max(P[0, 0], P[1, 1]))) + 0.5 * mount.size_m * float(np.sqrt(P[2, 2]))
+        margin = loc.params.roi_margin_px + 3.0 * sigma_m * cam.K[0, 0] / max(rng, 1e-3)
+        u0, v0 = np.floor(uv.min(axis=0) - margin).astype(int)
+        u1, v1 = np.ceil(uv.max(axis=0) + margin).astype(int)
+        u0, v0, u1, v1 = max(0, u0), max(0, v0), min(cam.width, u1), min(cam.height, v1)
+        if u1 - u0 >= 8 and v1 - v0 >= 8:
+            rois.append((int(u0), int(v0), int(u1), int(v1)))
+    return rois
+
+
+def test_planned_regions_of_a_frame_set_equal_the_per_camera_projection() -> None:
+    """All 12 real ceiling cameras and eight tracked robots spread over the warehouse, some at
+    image borders, with growing uncertainty: the regions planned for a whole frame set at once
+    (one array, the camera model's distortion in numpy) are exactly the ones each camera's own
+    projection through OpenCV gives."""
+    from simlan_data.geometry.calibration import available_camera_ids, load_calibration
+    from simlan_data.gpss.localization import PoseFix
+
+    ids = [c for c in available_camera_ids() if 160 <= int(c) <= 171]
+    assert len(ids) == 12
+    cameras = {c: load_calibration(c).camera.scaled(960, 540) for c in ids}
+    mounts = [
+        MarkerMount(f"robot_agent_{i}", i, MARKER_SIZE_M, TRUCK.marker_xyz[2], TRUCK.marker_xyz[:2])
+        for i in range(1, 9)
+    ]
+    loc = Localizer(cameras, mounts, LocalizerParams())
+    rng = np.random.default_rng(4)
+    centres = np.stack([cam.position[:2] for cam in cameras.values()])
+    lo, hi = centres.min(axis=0) - 3.0, centres.max(axis=0) + 3.0
+    compared = regions = 0
+    for step in range(6):
+        t = (step + 1) * NS_PER_S // 5
+        for m in mounts:  # a fix per robot, then the plans for the next instant (extrapolated)
+            x, y = rng.uniform(lo, hi)
+            fix = PoseFix(
+                m.namespace,
+                t,
+                float(x),
+                float(y),
+                float(rng.uniform(-np.pi, np.pi)),
+                0.01 * (step + 1),
+                0.02,
+                (),
+            )
+            loc._pending.append((t, fix))
+        loc.estimate(t)
+        plans = loc.search_plans(t + NS_PER_S // 10, ids)
+        for cid, plan in zip(ids, plans):
+            assert plan != "full"  # every robot is tracked
+            assert plan == _reference_rois(loc, t + NS_PER_S // 10, cid), (step, cid)
+            compared += 1
+            regions += len(plan)
+    assert compared == 72 and regions >= 20, regions

@@ -347,7 +347,8 @@ def replay_localizer(
         # releases the GIL); what they found is taken in camera order, exactly as the live run
         # and process_image do
         control_until(pending_t, inclusive=False)
-        planned = [(cid, localizer.search_plan(pending_t, cid)) for cid in camera_order if cid in pending]
+        ids = [cid for cid in camera_order if cid in pending]
+        planned = list(zip(ids, localizer.search_plans(pending_t, ids)))
         jobs = [
             (cid, plan, pool.submit(localizer.detect, cid, plan, jpeg=pending[cid]))
             for cid, plan in planned

@@ -115,8 +115,14 @@ class UnicycleEKF:
         self.P = np.eye(5)
         self.t_ns: int | None = None
         self.commands: list[tuple[int, float, float]] = []  # (from t_ns, v, w), time-ordered
+        # the last prediction from the current state: (t_ns, x, P) there. A later prediction whose
+        # segments pass through t_ns (a command starts there) goes on from it: the same steps on
+        # the same numbers as from the start, so the same result to the last bit
+        self._memo: tuple[int, NDArray[np.float64], NDArray[np.float64]] | None = None
 
     def command(self, t_ns: int, v: float, w: float) -> None:
+        if self._memo is not None and t_ns < self._memo[0]:
+            self._memo = None  # (out of order: the memo's segments did not know this command)
         self.commands.append((t_ns, v, w))
         if self.t_ns is not None:  # keep the command active at the filter's time and later ones
             while len(self.commands) >= 2 and self.commands[1][0] <= self.t_ns:
@@ -141,17 +147,28 @@ class UnicycleEKF:
         assert self.t_ns is not None
         if t_ns <= self.t_ns:
             return self.x.copy(), self.P.copy()
-        x, P = self.x.copy(), self.P.copy()
+        memo = self._memo
+        if memo is not None and memo[0] == t_ns:
+            return memo[1].copy(), memo[2].copy()
+        x, P = self.x, self.P
         cuts = [c[0] for c in self.commands if self.t_ns < c[0] < t_ns]
-        times = [self.t_ns, *cuts, t_ns]
+        if memo is not None and memo[0] in cuts:
+            cuts = cuts[cuts.index(memo[0]) + 1 :]
+            times = [memo[0], *cuts, t_ns]
+            x, P = memo[1], memo[2]
+        else:
+            times = [self.t_ns, *cuts, t_ns]
+        x = x.copy()
         for a, b in itertools.pairwise(times):
             active = [c for c in self.commands if c[0] <= a]
             if active:
                 x[3], x[4] = active[-1][1], active[-1][2]
             x, P = self._propagate(x, P, (b - a) / NS_PER_S)
+        self._memo = (t_ns, x.copy(), P.copy())
         return x, P
 
     def reset(self, fix: PoseFix) -> None:
+        self._memo = None
         self.x = np.array([fix.x_m, fix.y_m, fix.yaw_rad, 0.0, 0.0])
         self.P = np.diag([fix.sigma_xy_m**2, fix.sigma_xy_m**2, fix.sigma_yaw_rad**2, 1.0, 1.0])
         self.t_ns = fix.stamp_ns
@@ -165,6 +182,7 @@ class UnicycleEKF:
         if float(innovation @ np.linalg.solve(S, innovation)) > gate_sigma**2:
             return False
         K = P[:, :3] @ np.linalg.inv(S)
+        self._memo = None
         self.x = x + K @ innovation
         self.x[2] = float(wrap_angle(self.x[2]))
         self.P = (np.eye(5) - K[:, :3] @ np.eye(3, 5)) @ P
@@ -201,6 +219,21 @@ class _TickPredictions:
     untracked: bool  # some agent is not tracked (full searches are due)
     tracks: list[tuple[MarkerMount, NDArray[np.float64], Transform]]  # mount, covariance, marker pose
     corners: NDArray[np.float64]  # (4 x tracks, 3) their marker corners in map
+
+
+@dataclass(frozen=True)
+class _CameraArrays:
+    """The cameras' poses and limits as arrays, in ``Localizer.cameras`` order (for planning)."""
+
+    R: NDArray[np.float64]  # (C, 3, 3) camera from world
+    t: NDArray[np.float64]  # (C, 3)
+    position: NDArray[np.float64]  # (C, 3) centres in the world
+    valid_radius: NDArray[np.float64]  # (C,)
+    fx: NDArray[np.float64]  # (C,)
+    focal: NDArray[np.float64]  # (C, 2) fx, fy
+    centre: NDArray[np.float64]  # (C, 2) cx, cy
+    distortion: NDArray[np.float64]  # (C, 5) k1, k2, p1, p2, k3
+    size: NDArray[np.float64]  # (C, 2) width, height
 
 
 @dataclass
@@ -240,6 +273,7 @@ class Localizer:
         self._prediction_cache: dict[tuple[str, int], tuple] = {}
         self._tick_cache: dict[int, _TickPredictions] = {}
         self._slots = {c: i for i, c in enumerate(self.cameras)}
+        self._geo: _CameraArrays | None = None
         self._frame_obs: list[MarkerObservation] = []
         self._pending: deque[tuple[int, PoseFix]] = deque()  # (usable from, fix)
         self._full_cache: dict[tuple[str, bytes], tuple[list[Detection], list[MarkerObservation]]] = {}
@@ -264,45 +298,92 @@ class Localizer:
         (staggered across cameras, so that a lost or hidden robot costs a few full searches a
         second, not all of them).
         """
+        return self.search_plans(t_ns, [camera_id])[0]
+
+    def search_plans(self, t_ns: int, camera_ids: list[str]) -> list[str | list[Roi]]:
+        """:meth:`search_plan` of several cameras' images of one instant, computed together
+        (every tracked marker into every camera in one array; a replay plans a frame set so)."""
+        predicted = self._tick_predictions(t_ns)
+        every = self.params.full_search_every
+        plans: list[str | list[Roi]] = []
+        todo = []
+        for cid in camera_ids:
+            frame = self._frame_of(cid, t_ns)
+            if predicted.untracked and (frame == 0 or (frame + self._slots[cid]) % every == 0):
+                plans.append("full")
+            else:
+                plans.append([])
+                if predicted.tracks:
+                    todo.append(len(plans) - 1)
+        if not todo:
+            return plans
+        # every tracked marker's corners into every camera at once; the ones fully in front and
+        # inside the valid radius distorted to pixels (cheap rejection first)
+        geo = self._camera_arrays()
+        cams = np.array([self._slots[camera_ids[i]] for i in todo])
+        n = len(predicted.tracks)
+        pc = np.einsum("cij,pj->cpi", geo.R[cams], predicted.corners) + geo.t[cams][:, None, :]
+        pc = pc.reshape(len(cams), n, 4, 3)
+        front = (pc[..., 2] > 1e-9).all(axis=2)
+        z = np.where(pc[..., 2:3] > 1e-9, pc[..., 2:3], 1.0)
+        xy = pc[..., :2] / z
+        seen = front & (np.hypot(xy[..., 0], xy[..., 1]) <= geo.valid_radius[cams][:, None, None]).all(axis=2)
+        if not seen.any():
+            return plans
+        P = np.stack([P for _, P, _ in predicted.tracks])
+        size = np.array([m.size_m for m, _, _ in predicted.tracks])
+        sigma_m = np.sqrt(np.maximum(P[:, 0, 0], P[:, 1, 1])) + 0.5 * size * np.sqrt(P[:, 2, 2])
+        markers = np.stack([marker.translation for _, _, marker in predicted.tracks])
+        rng = np.linalg.norm(markers[None] - geo.position[cams][:, None], axis=2)  # (cameras, tracks)
+        margin = self.params.roi_margin_px + 3.0 * sigma_m[None] * geo.fx[cams][:, None] / np.maximum(
+            rng, 1e-3
+        )
+        # the corners distorted to pixels (the camera model's radial + tangential terms, as
+        # cv2.projectPoints; pixels only bound integer regions here), then each region's bounds
+        xy = np.where(seen[..., None, None], xy, 0.0)
+        d = geo.distortion[cams][:, None, None, :]  # (cameras, 1, 1, k1 k2 p1 p2 k3)
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (d[..., 0] + r2 * (d[..., 1] + r2 * d[..., 4]))
+        xd = x * radial + 2.0 * d[..., 2] * x * y + d[..., 3] * (r2 + 2.0 * x * x)
+        yd = y * radial + d[..., 2] * (r2 + 2.0 * y * y) + 2.0 * d[..., 3] * x * y
+        f, c = geo.focal[cams][:, None, None, :], geo.centre[cams][:, None, None, :]
+        uv = np.stack([xd, yd], axis=-1) * f + c  # (cameras, tracks, 4, 2)
+        lo = np.maximum(np.floor(uv.min(axis=2) - margin[..., None]), 0.0)
+        hi = np.minimum(np.ceil(uv.max(axis=2) + margin[..., None]), geo.size[cams][:, None, :])
+        keep = seen & ((hi - lo) >= 8).all(axis=2)
+        boxes = np.concatenate([lo, hi], axis=2).astype(int)
+        for row, k in zip(*(a.tolist() for a in np.nonzero(keep))):
+            plan = plans[todo[row]]
+            assert isinstance(plan, list)
+            plan.append(tuple(boxes[row, k].tolist()))  # type: ignore[arg-type]
+        return plans
+
+    def _frame_of(self, camera_id: str, t_ns: int) -> int:
+        """This camera's frame number at ``t_ns`` (counted on first sight of each instant)."""
         frame = self._frame_index.get((camera_id, t_ns))
         if frame is None:
             frame = self._frames_seen.get(camera_id, 0)
             self._frames_seen[camera_id] = frame + 1
             self._frame_index = {k: v for k, v in self._frame_index.items() if k[0] != camera_id}
             self._frame_index[(camera_id, t_ns)] = frame
-        predicted = self._tick_predictions(t_ns)
-        slot = self._slots[camera_id]
-        if predicted.untracked and (frame == 0 or (frame + slot) % self.params.full_search_every == 0):
-            return "full"
-        if not predicted.tracks:
-            return []
-        # every tracked marker at once: corners into this camera, the ones fully in front and
-        # inside the valid radius distorted to pixels (cam.project, cheap rejection first)
-        cam = self.cameras[camera_id]
-        n = len(predicted.tracks)
-        pc = cam.world_to_camera(predicted.corners).reshape(n, 4, 3)
-        front = (pc[:, :, 2] > 1e-9).all(axis=1)
-        if not front.any():
-            return []
-        z = np.where(pc[:, :, 2:3] > 1e-9, pc[:, :, 2:3], 1.0)
-        xy = pc[:, :, :2] / z
-        seen = front & (np.hypot(xy[:, :, 0], xy[:, :, 1]) <= cam.valid_radius).all(axis=1)
-        if not seen.any():
-            return []
-        idx = np.flatnonzero(seen)
-        uv_all = cam.distort_normalized(xy[idx].reshape(-1, 2)).reshape(len(idx), 4, 2)
-        rois: list[Roi] = []
-        for k, uv in zip(idx.tolist(), uv_all):
-            m, P, marker = predicted.tracks[k]
-            rng = float(np.linalg.norm(marker.translation - cam.position))
-            sigma_m = float(np.sqrt(max(P[0, 0], P[1, 1]))) + 0.5 * m.size_m * float(np.sqrt(P[2, 2]))
-            margin = self.params.roi_margin_px + 3.0 * sigma_m * cam.K[0, 0] / max(rng, 1e-3)
-            u0, v0 = np.floor(uv.min(axis=0) - margin).astype(int)
-            u1, v1 = np.ceil(uv.max(axis=0) + margin).astype(int)
-            u0, v0, u1, v1 = max(0, u0), max(0, v0), min(cam.width, u1), min(cam.height, v1)
-            if u1 - u0 >= 8 and v1 - v0 >= 8:
-                rois.append((int(u0), int(v0), int(u1), int(v1)))
-        return rois
+        return frame
+
+    def _camera_arrays(self) -> _CameraArrays:
+        if self._geo is None:
+            cams = list(self.cameras.values())
+            self._geo = _CameraArrays(
+                R=np.stack([c.camera_from_world.rotation for c in cams]),
+                t=np.stack([c.camera_from_world.translation for c in cams]),
+                position=np.stack([c.position for c in cams]),
+                valid_radius=np.array([c.valid_radius for c in cams]),
+                fx=np.array([c.K[0, 0] for c in cams]),
+                focal=np.array([[c.K[0, 0], c.K[1, 1]] for c in cams]),
+                centre=np.array([[c.K[0, 2], c.K[1, 2]] for c in cams]),
+                distortion=np.array([np.pad(np.ravel(c.D)[:5], (0, max(0, 5 - np.size(c.D)))) for c in cams]),
+                size=np.array([[c.width, c.height] for c in cams], dtype=float),
+            )
+        return self._geo
 
     def _tick_predictions(self, t_ns: int) -> _TickPredictions:
         """Every tracked agent's predicted marker at ``t_ns`` (memoized for the cameras of one
