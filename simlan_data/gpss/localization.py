@@ -356,7 +356,7 @@ class Localizer:
         for row, k in zip(*(a.tolist() for a in np.nonzero(keep))):
             plan = plans[todo[row]]
             assert isinstance(plan, list)
-            plan.append(tuple(boxes[row, k].tolist()))  # type: ignore[arg-type]
+            plan.append(tuple(boxes[row, k].tolist()))
         return plans
 
     def _frame_of(self, camera_id: str, t_ns: int) -> int:

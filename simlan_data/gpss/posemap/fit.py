@@ -181,7 +181,7 @@ def posterior_cov(landmarks: NDArray[np.float32], rig: Rig, q: F64, params: FitP
     _, normal = _residuals(q, obs, weights, focal, _cameras_from_base(rig), normal=True)
     assert normal is not None
     lo, hi = sampling_box(params.limit_scale)
-    return np.linalg.inv(normal[0] + np.diag(12.0 / (hi - lo) ** 2))
+    return np.asarray(np.linalg.inv(normal[0] + np.diag(12.0 / (hi - lo) ** 2)), dtype=np.float64)
 
 
 def posterior_sd(landmarks: NDArray[np.float32], rig: Rig, q: F64, params: FitParams) -> F64:
