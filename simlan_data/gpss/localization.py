@@ -229,7 +229,6 @@ class _CameraArrays:
     t: NDArray[np.float64]  # (C, 3)
     position: NDArray[np.float64]  # (C, 3) centres in the world
     valid_radius: NDArray[np.float64]  # (C,)
-    fx: NDArray[np.float64]  # (C,)
     focal: NDArray[np.float64]  # (C, 2) fx, fy
     centre: NDArray[np.float64]  # (C, 2) cx, cy
     distortion: NDArray[np.float64]  # (C, 5) k1, k2, p1, p2, k3
@@ -335,7 +334,7 @@ class Localizer:
         sigma_m = np.sqrt(np.maximum(P[:, 0, 0], P[:, 1, 1])) + 0.5 * size * np.sqrt(P[:, 2, 2])
         markers = np.stack([marker.translation for _, _, marker in predicted.tracks])
         rng = np.linalg.norm(markers[None] - geo.position[cams][:, None], axis=2)  # (cameras, tracks)
-        margin = self.params.roi_margin_px + 3.0 * sigma_m[None] * geo.fx[cams][:, None] / np.maximum(
+        margin = self.params.roi_margin_px + 3.0 * sigma_m[None] * geo.focal[cams][:, :1] / np.maximum(
             rng, 1e-3
         )
         # the corners distorted to pixels (the camera model's radial + tangential terms, as
@@ -377,7 +376,6 @@ class Localizer:
                 t=np.stack([c.camera_from_world.translation for c in cams]),
                 position=np.stack([c.position for c in cams]),
                 valid_radius=np.array([c.valid_radius for c in cams]),
-                fx=np.array([c.K[0, 0] for c in cams]),
                 focal=np.array([[c.K[0, 0], c.K[1, 1]] for c in cams]),
                 centre=np.array([[c.K[0, 2], c.K[1, 2]] for c in cams]),
                 distortion=np.array([np.pad(np.ravel(c.D)[:5], (0, max(0, 5 - np.size(c.D)))) for c in cams]),
