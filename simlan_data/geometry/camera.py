@@ -258,17 +258,7 @@ class CameraModel:
 
     def _distort_numpy(self, xy: FloatArray) -> FloatArray:
         """Apply the distortion to normalized coordinates, in normalized units (no K)."""
-        k1, k2, p1, p2, k3 = (float(c) for c in self.D[:5])
-        x, y = xy[:, 0], xy[:, 1]
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        return np.stack(
-            [
-                x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-                y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-            ],
-            axis=1,
-        )
+        return np.stack(distort_points(xy[:, 0], xy[:, 1], *self._float_params[5:]), axis=1)
 
     def pixel_rays(self, uv: ArrayLike, *, distorted: bool = True) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Return unit rays in the camera frame (N, 3) through pixels, and their validity."""
@@ -299,6 +289,26 @@ class CameraModel:
     def opengl_view(self) -> list[float]:
         """World -> OpenGL eye matrix, column-major (PyBullet's viewMatrix)."""
         return (_GL_FROM_CV @ self.camera_from_world.matrix()).T.ravel().tolist()
+
+
+def distort_points(
+    x: FloatArray,
+    y: FloatArray,
+    k1: float | FloatArray,
+    k2: float | FloatArray,
+    p1: float | FloatArray,
+    p2: float | FloatArray,
+    k3: float | FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """The radial + tangential model on normalized coordinates: distorted (x, y), normalized.
+
+    The coefficients broadcast against ``x`` and ``y`` (several cameras at once)."""
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    return (
+        x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+        y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+    )
 
 
 def opengl_projection(K: ArrayLike, width: int, height: int, *, near_m: float, far_m: float) -> list[float]:

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..constants import NS_PER_S
-from ..geometry.camera import CameraModel
+from ..geometry.camera import CameraModel, distort_points
 from ..geometry.rotations import wrap_angle
 from ..geometry.transforms import Transform
 from .jpeg_regions import decode_gray_regions
@@ -341,11 +341,7 @@ class Localizer:
         # cv2.projectPoints; pixels only bound integer regions here), then each region's bounds
         xy = np.where(seen[..., None, None], xy, 0.0)
         d = geo.distortion[cams][:, None, None, :]  # (cameras, 1, 1, k1 k2 p1 p2 k3)
-        x, y = xy[..., 0], xy[..., 1]
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (d[..., 0] + r2 * (d[..., 1] + r2 * d[..., 4]))
-        xd = x * radial + 2.0 * d[..., 2] * x * y + d[..., 3] * (r2 + 2.0 * x * x)
-        yd = y * radial + d[..., 2] * (r2 + 2.0 * y * y) + 2.0 * d[..., 3] * x * y
+        xd, yd = distort_points(xy[..., 0], xy[..., 1], *(d[..., i] for i in range(5)))
         f, c = geo.focal[cams][:, None, None, :], geo.centre[cams][:, None, None, :]
         uv = np.stack([xd, yd], axis=-1) * f + c  # (cameras, tracks, 4, 2)
         lo = np.maximum(np.floor(uv.min(axis=2) - margin[..., None]), 0.0)
@@ -378,7 +374,7 @@ class Localizer:
                 valid_radius=np.array([c.valid_radius for c in cams]),
                 focal=np.array([[c.K[0, 0], c.K[1, 1]] for c in cams]),
                 centre=np.array([[c.K[0, 2], c.K[1, 2]] for c in cams]),
-                distortion=np.array([np.pad(np.ravel(c.D)[:5], (0, max(0, 5 - np.size(c.D)))) for c in cams]),
+                distortion=np.array([np.ravel(c.D)[:5] for c in cams], dtype=float),  # as CameraModel
                 size=np.array([[c.width, c.height] for c in cams], dtype=float),
             )
         return self._geo
