@@ -254,12 +254,11 @@ _STARTED: list[bool] = []  # set once Hydra has composed the config and called _
 @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def _app(cfg: DictConfig) -> Any:
     _STARTED.append(True)
-    to_config(cfg)  # (bad input answered before anything else)
     hydra_cfg = HydraConfig.get()
     run_dir = Path(hydra_cfg.runtime.output_dir)
     cores = job_cpu_share(hydra_cfg)
     limit_threads(cores)
-    single_core_job(cfg, cores, list(hydra_cfg.overrides.task))
+    single_core_job(cfg, cores, list(hydra_cfg.overrides.task))  # (before checking: it sets a field)
     typed = to_config(cfg)
     config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
     if typed.posemap.task != "none":
