@@ -81,6 +81,10 @@ def test_fit_puts_the_skeleton_on_the_landmarks_from_the_mean_pose(trained: tupl
     assert err.mean() < err1.mean(axis=1).mean()
 
 
+def _sd(cov: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("nii->ni", cov))
+
+
 def test_posterior_sd_is_the_fits_error_scale(trained: tuple[Path, Path]) -> None:
     """The Laplace sigma the information bound is built from predicts the fit's actual error: fits
     of 150 noisy views (1 px at 480x270) started at the truth and barely pulled to it land about one sigma off
@@ -89,7 +93,7 @@ def test_posterior_sd_is_the_fits_error_scale(trained: tuple[Path, Path]) -> Non
     q_true = S.sample_joints(np.random.default_rng(8), 150)
     lm = _views(rig, q_true, noise_px=1.0, seed=8)
     params = F.FitParams(noise_px=1.0, hidden_noise_px=1.0, iterations=30, starts=1, curve_median=False)
-    sd = F.posterior_sd(lm, rig, q_true, params)
+    sd = _sd(F.posterior_cov(lm, rig, q_true, params))
     assert sd.shape == q_true.shape and np.isfinite(sd).all()
     q_fit, _ = F.fit_from(lm, rig, q_true, q_true, 10.0, params)
     ambiguous = {n for group, _ in ambiguous_groups() for n in group}
@@ -97,7 +101,7 @@ def test_posterior_sd_is_the_fits_error_scale(trained: tuple[Path, Path]) -> Non
     assert len(determined) >= 15, len(determined)
     z = (q_fit - q_true)[:, determined] / sd[:, determined]
     assert 0.7 < z.std() < 1.4, z.std(axis=0)
-    doubled = F.posterior_sd(lm, rig, q_true, F.FitParams(noise_px=2.0, hidden_noise_px=2.0))
+    doubled = _sd(F.posterior_cov(lm, rig, q_true, F.FitParams(noise_px=2.0, hidden_noise_px=2.0)))
     ratio = np.median(doubled[:, determined] / sd[:, determined])
     assert 1.6 < ratio <= 2.0, ratio  # below 2 only by the box's share of the information
 

@@ -184,11 +184,6 @@ def posterior_cov(landmarks: NDArray[np.float32], rig: Rig, q: F64, params: FitP
     return np.asarray(np.linalg.inv(normal[0] + np.diag(12.0 / (hi - lo) ** 2)), dtype=np.float64)
 
 
-def posterior_sd(landmarks: NDArray[np.float32], rig: Rig, q: F64, params: FitParams) -> F64:
-    """(N, 47): the square root of :func:`posterior_cov`'s diagonal, one sigma per joint."""
-    return np.sqrt(np.einsum("nii->ni", posterior_cov(landmarks, rig, q, params)))
-
-
 def fit_from(
     landmarks: NDArray[np.float32],
     rig: Rig,
