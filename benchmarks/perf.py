@@ -256,12 +256,16 @@ def gpss_runs(out: Path, duration: float) -> tuple[str, dict]:
 def replay(recordings: dict[str, Path], out: Path) -> tuple[str, dict]:
     """Replay the localization over each recording; speed against real time."""
     raw, rows = {}, []
-    # the bag read by a thread (the default) and, for the first recording, by a forked process
-    # (--set reader=process: off the replay's GIL, but every image goes through a pipe)
+    # the default reader (auto: a forked process when a core is free, else a thread) and, for the
+    # first recording, each reader forced: a thread, and a process (off the replay's GIL, but
+    # every image goes through a pipe)
     first = next(iter(recordings), None)
     cases = [(name, rec, []) for name, rec in recordings.items()]
     if first is not None:
-        cases.insert(1, (f"{first}, bag read by a process", recordings[first], ["--set", "reader=process"]))
+        cases[1:1] = [
+            (f"{first}, bag read by a thread", recordings[first], ["--set", "reader=thread"]),
+            (f"{first}, bag read by a process", recordings[first], ["--set", "reader=process"]),
+        ]
     for i, (name, recording, extra) in enumerate(cases):
         dest = out / f"replay_{i}"
         proc = run_cli(str(recording), "--out", str(dest), *extra, module="simlan_data.replay")
@@ -277,6 +281,7 @@ def replay(recordings: dict[str, Path], out: Path) -> tuple[str, dict]:
         rows.append(
             [
                 name,
+                "process" if m.get("replay.localization.reading_process") else "thread",
                 f"{m['replay.wall_s'] * m['replay.speed_x_realtime']:.1f}",
                 f"{m['replay.wall_s']:.2f}",
                 f"{m['replay.cpu_s']:.2f}",
@@ -290,6 +295,7 @@ def replay(recordings: dict[str, Path], out: Path) -> tuple[str, dict]:
     md = table(
         [
             "replay (localization) of",
+            "reader",
             "recorded s",
             "wall s",
             "CPU s",

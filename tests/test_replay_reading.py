@@ -1,5 +1,5 @@
 """The localization replay's reading process (--set reader=process): the same results as the
-reading thread (the default), its errors raised in the replay, stopped when the replay stops
+reading thread, its errors raised in the replay, stopped when the replay stops
 early; the rows the metrics need, collected while reading. Real runs, real forks."""
 
 from __future__ import annotations
@@ -29,12 +29,16 @@ def _replay(recording: Path, out: Path, *extra: str) -> dict[str, float]:
 def test_reading_process_and_reading_thread_give_the_same_replay(short_run: Path, tmp_path: Path) -> None:
     recording = short_run / "recording"
     by_process = _replay(recording, tmp_path / "process", "--set", "reader=process")
-    by_thread = _replay(recording, tmp_path / "thread")  # (the default)
+    by_thread = _replay(recording, tmp_path / "thread", "--set", "reader=thread")
     assert by_process["replay.children_cpu_s"] > 0  # the reading process's CPU is counted
     assert by_thread["replay.children_cpu_s"] == 0
+    assert (
+        by_process["replay.localization.reading_process"],
+        by_thread["replay.localization.reading_process"],
+    ) == (1, 0)
     timed = ("replay.speed_x_realtime", "replay.localization.wall_s", "replay.localization.frame_ms")
     for key in set(by_process) | set(by_thread):
-        if key in TIMING or key.startswith(timed):
+        if key in TIMING or key.startswith(timed) or key == "replay.localization.reading_process":
             continue
         assert by_process.get(key) == by_thread.get(key), key
     assert by_process["replay.localization.max_diff_to_live_m"] == 0.0
@@ -42,6 +46,24 @@ def test_reading_process_and_reading_thread_give_the_same_replay(short_run: Path
         a, b = pl.read_parquet(tmp_path / "process" / name), pl.read_parquet(tmp_path / "thread" / name)
         keep = [c for c in a.columns if c != "seconds"]
         assert a.select(keep).equals(b.select(keep)), name
+
+
+@pytest.mark.parametrize(
+    ("requested", "cores", "load", "chosen"),
+    [
+        ("auto", 2, 0.3, "process"),  # a quiet machine: the bag is read on the free core
+        ("auto", 2, 1.4, "process"),  # (the lagging average just after other work)
+        ("auto", 2, 1.6, "thread"),  # no core free: the pipe's hand-over would only cost
+        ("auto", 1, 0.0, "thread"),
+        ("auto", 8, 7.0, "process"),
+        ("thread", 8, 0.0, "thread"),  # an explicit choice stands
+        ("process", 2, 4.0, "process"),
+    ],
+)
+def test_auto_reader_takes_the_process_only_when_a_core_is_free(
+    requested: str, cores: int, load: float, chosen: str
+) -> None:
+    assert lr.choose_reader(requested, cpu_count=cores, load_1min=load) == chosen
 
 
 def test_rows_collected_while_reading_make_the_same_tables(short_run: Path) -> None:
@@ -98,4 +120,4 @@ def test_unknown_reader_is_one_error_line(short_run: Path, tmp_path: Path) -> No
         module="simlan_data.replay",
     )
     assert proc.returncode == 2
-    assert "error: unknown reader 'disk' in replay --set reader: known: thread, process" in proc.stderr
+    assert "error: unknown reader 'disk' in replay --set reader: known: auto, thread, process" in proc.stderr

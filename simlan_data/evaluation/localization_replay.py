@@ -8,9 +8,9 @@ the same algorithm and parameters it reproduces the live estimates exactly; with
 Options (``--set``): ``method``, ``unobserved_timeout_s``, ``lost_timeout_s``,
 ``processing_delay_s``, ``bias_m`` (default: the recording's ``localization`` section) and the
 camera faults ``drop_cameras``, ``yaw_error_deg``, ``yaw_error_cameras`` (default: its ``faults``
-section); ``navigation=false`` skips the navigation metrics; ``reader=process`` reads the bag in
-a forked process instead of on a thread (Linux; measured slower on 2 busy cores, see
-:class:`ReadingProcess`).
+section); ``navigation=false`` skips the navigation metrics; ``reader`` is ``auto`` (default:
+a forked reading process when a core is free, else a reading thread; see :func:`choose_reader`),
+``process`` (Linux) or ``thread``. Every reader gives the same results to the bit.
 """
 
 from __future__ import annotations
@@ -177,7 +177,30 @@ def in_background(items: Iterator[T], *, depth: int) -> Iterator[T]:
         thread.join()
 
 
-READERS = ("thread", "process")
+READERS = ("auto", "thread", "process")
+
+
+def choose_reader(requested: str, *, cpu_count: int | None = None, load_1min: float | None = None) -> str:
+    """The reader a replay uses: ``auto`` takes the reading process when a core is about free
+    (1-minute load average < cores - 0.5, on Linux), else the reading thread.
+
+    Measured on the 20 s 12-camera recording, 2 cores (BENCHMARKS.md, section 5): on a quiet
+    machine the process was 10-35 % faster (the bag's Python record walk leaves the replay's
+    GIL); with two busy processes beside it, it was slower (its images cross a pipe, and the
+    extra process competes for the cores). The load average lags (a minute): right after other
+    work ends it still reads about 1-1.5 on 2 cores, hence the half-core margin.
+    """
+    if requested != "auto":
+        return requested
+    if sys.platform != "linux":
+        return "thread"
+    cores = cpu_count if cpu_count is not None else (os.cpu_count() or 1)
+    if load_1min is None:
+        try:
+            load_1min = os.getloadavg()[0]
+        except OSError:
+            return "thread"
+    return "process" if cores >= 2 and load_1min < cores - 0.5 else "thread"
 
 
 def _read_frame_sets(
@@ -406,8 +429,9 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
             f"unknown reader {read_in!r}",
             "replay --set reader",
             f"known: {', '.join(READERS)}",
-            "use thread",
+            "use auto",
         )
+    read_in = choose_reader(read_in)
     wall0 = time.perf_counter()
     consistency = CameraConsistency()
     mounts, _ = marker_mounts(config)
@@ -437,6 +461,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     frames = [t.seconds for t in localizer.timings]
     metrics.update(consistency.metrics("replay.localization."))
     metrics["replay.localization.wall_s"] = wall
+    metrics["replay.localization.reading_process"] = float(in_process)  # (which reader auto took)
     metrics["replay.localization.frames_processed"] = float(len(frames))
     if frames:
         metrics["replay.localization.frame_ms_median"] = float(np.median(frames) * 1e3)
