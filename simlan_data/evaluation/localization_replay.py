@@ -182,18 +182,19 @@ READERS = ("auto", "thread", "process")
 
 def choose_reader(requested: str, *, cpu_count: int | None = None, load_1min: float | None = None) -> str:
     """The reader a replay uses: ``auto`` takes the reading process when a core is about free
-    (1-minute load average < cores - 0.5, on Linux), else the reading thread.
+    (1-minute load average < cores - 0.5), else the reading thread; off Linux always the thread
+    (the reading process forks).
 
     Measured on the 20 s 12-camera recording, 2 cores (BENCHMARKS.md, section 5): on a quiet
-    machine the process was 10-35 % faster (the bag's Python record walk leaves the replay's
+    or lightly loaded machine the process was 8-35 % faster (the bag's Python record walk leaves the replay's
     GIL); with two busy processes beside it, it was slower (its images cross a pipe, and the
     extra process competes for the cores). The load average lags (a minute): right after other
     work ends it still reads about 1-1.5 on 2 cores, hence the half-core margin.
     """
-    if requested != "auto":
-        return requested
     if sys.platform != "linux":
         return "thread"
+    if requested != "auto":
+        return requested
     cores = cpu_count if cpu_count is not None else (os.cpu_count() or 1)
     if load_1min is None:
         try:
@@ -441,7 +442,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
         estimates_of=[m.namespace for m in mounts],
         navigation_of=drives if ctx.options.get("navigation", True) else (),
     )
-    in_process = read_in == "process" and sys.platform == "linux"
+    in_process = read_in == "process"
     # the reading process starts before the cameras are known: it reads while they are built
     with (
         ReadingProcess(
