@@ -147,3 +147,30 @@ def test_few_points_undistort_like_many(cam) -> None:
     assert 0 < many_ok.sum() < len(uv)
     np.testing.assert_array_equal(few_ok, many_ok)
     np.testing.assert_allclose(few_xy[many_ok], many_xy[many_ok], rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("camera_id", ["160", "163", "168", "500"])
+def test_few_points_plane_and_projection_like_the_array_path(camera_id: str) -> None:
+    """intersect_plane_z_few / project_few (a marker's corners) against intersect_plane_z and
+    cv2.projectPoints, including pixels without a valid ray and points behind the camera."""
+    cam = load_calibration(camera_id).camera.scaled(960, 540)
+    rng = np.random.default_rng(int(camera_id))
+    uv = rng.uniform([-30, -30], [990, 570], size=(800, 2))
+    for z in (0.0, 0.35, 1.5):
+        many, ok = cam.intersect_plane_z(uv, z)
+        for i in range(0, len(uv), 4):
+            few = cam.intersect_plane_z_few(uv[i : i + 4], z)
+            assert (few is not None) == bool(ok[i : i + 4].all())
+            if few is not None:
+                np.testing.assert_allclose(few, many[i : i + 4, :2], rtol=0, atol=1e-9)
+    rvec, _ = cv2.Rodrigues(cam.camera_from_world.rotation)
+    pts = np.concatenate([_floor_points(cam, 200, 0.3), cam.position + rng.normal(0, 3, (40, 3))])
+    _, ok = cam.project(pts)
+    assert 0 < (~ok).sum() < len(pts)  # some behind the camera or outside the valid radius
+    ref, _ = cv2.projectPoints(pts, rvec, cam.camera_from_world.translation, cam.K, cam.D)
+    ref = ref.reshape(-1, 2)
+    for i in range(len(pts)):
+        one = cam.project_few([tuple(pts[i])])
+        assert (one is not None) == bool(ok[i])
+        if one is not None:
+            np.testing.assert_allclose(one[0], ref[i], rtol=0, atol=1e-7)

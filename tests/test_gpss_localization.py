@@ -91,6 +91,54 @@ def test_per_camera_marker_poses_against_ground_truth(frames, method, max_median
     assert np.mean(errors[:, 0] < 3 * sigmas) > 0.8
 
 
+CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+
+
+def _undistort_iter(src, K, D, *, criteria):
+    """OpenCV 4's undistortPointsIter; OpenCV 5 folded it into undistortPoints."""
+    if hasattr(cv2, "undistortPointsIter"):
+        return cv2.undistortPointsIter(src, K, D, None, None, criteria)
+    return cv2.undistortPoints(src, K, D, criteria=criteria)
+
+
+def test_ground_constraint_pose_against_an_opencv_reference(frames) -> None:
+    """The ground-constraint pose (plain floats) step by step with OpenCV: corners undistorted by
+    cv2.undistortPointsIter, rays onto the marker's plane, the square's centre and yaw, the ideal
+    square back through cv2.projectPoints for the reprojection error."""
+    cameras, images = frames
+    detector = MarkerDetector()
+    checked = 0
+    for _, cid, gray, _ in images[::2]:
+        cam = cameras[cid]
+        for det in detector.detect(cid, gray):
+            if det.marker_id != 1:
+                continue
+            obs = POSE_METHODS["ground"](cam, det, MOUNT)
+            assert obs is not None
+            pixels = det.corners_px.reshape(-1, 1, 2)
+            xy = _undistort_iter(pixels, cam.K, cam.D, criteria=CRITERIA).reshape(-1, 2)
+            rays = cam.world_from_camera.rotation @ np.c_[xy, np.ones(4)].T
+            s = (MOUNT.height_m - cam.position[2]) / rays[2]
+            p = cam.position[:2, None] + s * rays[:2]  # (2, 4): TL, TR, BR, BL on the plane
+            x_axis = (p[:, 1] - p[:, 0]) + (p[:, 2] - p[:, 3])
+            y_axis = (p[:, 0] - p[:, 3]) + (p[:, 1] - p[:, 2])
+            v = x_axis / np.linalg.norm(x_axis) + np.array([y_axis[1], -y_axis[0]]) / np.linalg.norm(y_axis)
+            yaw = np.arctan2(v[1], v[0])
+            np.testing.assert_allclose([obs.x_m, obs.y_m], p.mean(axis=1), rtol=0, atol=1e-7)
+            assert abs(wrap_angle(obs.yaw_rad - yaw)) < 1e-7
+            ideal = Transform.from_pose2d(obs.x_m, obs.y_m, obs.yaw_rad, MOUNT.height_m).apply(
+                MARKER_SIZE_M / 2 * np.array([[-1.0, 1, 0], [1, 1, 0], [1, -1, 0], [-1, -1, 0]])
+            )
+            rvec, _ = cv2.Rodrigues(cam.camera_from_world.rotation)
+            uv, _ = cv2.projectPoints(ideal, rvec, cam.camera_from_world.translation, cam.K, cam.D)
+            reproj = np.sqrt(np.mean(np.sum((uv.reshape(-1, 2) - det.corners_px) ** 2, axis=1)))
+            assert abs(obs.reprojection_px - reproj) < 1e-6
+            side = np.linalg.norm(det.corners_px - np.roll(det.corners_px, 1, axis=0), axis=1).mean()
+            assert abs(obs.side_px - side) < 1e-9
+            checked += 1
+    assert checked >= 10
+
+
 def test_ground_constraint_beats_pnp_in_position(frames) -> None:
     cameras, images = frames
     ground = _observations(cameras, images, "ground")

@@ -285,6 +285,68 @@ class CameraModel:
         s = np.where(ok, s, 0.0)
         return origin + s[:, None] * rays_w, ok
 
+    # ------------------------------------------------------------- a few points, plain floats
+    # A marker has four corners: numpy's per-call overhead on arrays that small cost about five
+    # times the arithmetic (the ground-constraint pose of every marker seen, ~0.2 ms each, most
+    # of it with the GIL held). The same model as the array methods above; results agree with
+    # them to rounding (tests/test_camera.py).
+
+    @cached_property
+    def _pose_floats(
+        self,
+    ) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+        """camera_from_world R (row-major) and t, world_from_camera R (row-major) and the centre."""
+        cw, wc = self.camera_from_world, self.world_from_camera
+        return (
+            tuple(cw.rotation.ravel().tolist()),
+            tuple(cw.translation.tolist()),
+            tuple(wc.rotation.ravel().tolist()),
+            tuple(self.position.tolist()),
+        )
+
+    def intersect_plane_z_few(
+        self, uv: list[tuple[float, float]] | FloatArray, z_m: float
+    ) -> list[tuple[float, float]] | None:
+        """:meth:`intersect_plane_z` of a few distorted pixels: their (x, y) on the plane
+        z = ``z_m``, or None if any of them has no valid ray or meets the plane behind the camera."""
+        xy, ok = self._undistort_few(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
+        if not ok.all():
+            return None
+        _, _, (r00, r01, r02, r10, r11, r12, r20, r21, r22), (ox, oy, oz) = self._pose_floats
+        out = []
+        for x, y in xy.tolist():
+            dz = r20 * x + r21 * y + r22  # the ray (x, y, 1) in the world
+            if dz == 0.0:
+                return None
+            s = (z_m - oz) / dz
+            if not (math.isfinite(s) and s > 0.0):
+                return None
+            out.append((ox + s * (r00 * x + r01 * y + r02), oy + s * (r10 * x + r11 * y + r12)))
+        return out
+
+    def project_few(self, points_world: list[tuple[float, float, float]]) -> list[tuple[float, float]] | None:
+        """:meth:`project` of a few world points to distorted pixels (as ``cv2.projectPoints``:
+        fx, fy, cx, cy and k1 k2 p1 p2 k3), or None if any is behind the camera or outside the
+        valid radius."""
+        (a00, a01, a02, a10, a11, a12, a20, a21, a22), (tx, ty, tz), _, _ = self._pose_floats
+        fx, fy, cx, cy, _, k1, k2, p1, p2, k3 = self._float_params
+        valid_radius = self.valid_radius
+        out = []
+        for px, py, pz in points_world:
+            z = a20 * px + a21 * py + a22 * pz + tz
+            if not z > 1e-9:
+                return None
+            x = (a00 * px + a01 * py + a02 * pz + tx) / z
+            y = (a10 * px + a11 * py + a12 * pz + ty) / z
+            if not math.hypot(x, y) <= valid_radius:
+                return None
+            r2 = x * x + y * y
+            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+            out.append((fx * xd + cx, fy * yd + cy))
+        return out
+
     # ------------------------------------------------------------------------------- OpenGL
     def opengl_view(self) -> list[float]:
         """World -> OpenGL eye matrix, column-major (PyBullet's viewMatrix)."""

@@ -170,23 +170,32 @@ def sub_jpeg(seg: JpegSegments, bounds: tuple[int, int, int, int]) -> bytes:
 
 def decode_gray_regions(
     jpeg: bytes | NDArray[np.uint8], rois: list[tuple[int, int, int, int]]
-) -> NDArray[np.uint8] | None:
-    """A full-size grey image whose ``rois`` hold the decoded pixels (the rest is zero), decoding
-    only the restart segments they cover; None if the JPEG has no usable restart markers (then
-    decode it whole) or a region does not decode."""
+) -> list[NDArray[np.uint8]] | None:
+    """The grey pixels of each of ``rois`` (u0, v0, u1, v1 with u0, v0 >= 0), as
+    ``whole_image[v0:v1, u0:u1]`` would give them (clipped at the image's border), decoding only
+    the restart segments each covers; None if the JPEG has no usable restart markers (then
+    decode it whole) or a region does not decode.
+
+    (No full-size canvas: allocating and zeroing one per image cost more than decoding the
+    regions.)"""
     raw = jpeg.tobytes() if isinstance(jpeg, np.ndarray) else jpeg
     seg = segments(raw)
     if seg is None:
         return None
-    gray = np.zeros((seg.height, seg.width), dtype=np.uint8)
-    for roi in rois:
-        x0, y0, x1, y1 = crop_bounds(seg, roi)
+    out = []
+    for u0, v0, u1, v1 in rois:
+        if u0 < 0 or v0 < 0:
+            raise ValueError(f"region {(u0, v0, u1, v1)} starts outside the image")
+        x0, y0, x1, y1 = crop_bounds(seg, (u0, v0, u1, v1))
         if x1 <= x0 or y1 <= y0:
+            out.append(
+                np.zeros((max(0, min(v1, seg.height) - v0), max(0, min(u1, seg.width) - u0)), np.uint8)
+            )
             continue
         part = cv2.imdecode(
             np.frombuffer(sub_jpeg(seg, (x0, y0, x1, y1)), dtype=np.uint8), cv2.IMREAD_GRAYSCALE
         )
         if part is None or part.shape != (y1 - y0, x1 - x0):
             return None
-        gray[y0:y1, x0:x1] = part
-    return gray
+        out.append(part[v0 - y0 : v1 - y0, u0 - x0 : u1 - x0])
+    return out

@@ -450,21 +450,25 @@ class Localizer:
         cached = self._full_cache.get(key) if key is not None else None
         if cached is not None:
             return ImageSearch(cached[0], cached[1], time.perf_counter() - t0)
+        crops = None
         if gray is None and plan != "full":
             # only the regions searched: same pixels as a whole decode (jpeg_regions), or None
             # for a JPEG without restart markers
             assert data is not None
-            gray = decode_gray_regions(data, plan)  # type: ignore[arg-type]
-        if gray is None:
+            crops = decode_gray_regions(data, plan)  # type: ignore[arg-type]
+        if gray is None and crops is None:
             assert data is not None
             gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
         detector = self._thread_detector()
         if plan == "full":
             detections = detector.detect(camera_id, gray)
         else:
+            assert not isinstance(plan, str)
+            if crops is None:
+                crops = [gray[v0:v1, u0:u1] for u0, v0, u1, v1 in plan]
             found: dict[int, Detection] = {}
-            for roi in plan:
-                for d in detector.detect(camera_id, gray, roi):
+            for roi, pixels in zip(plan, crops):
+                for d in detector.detect_region(camera_id, pixels, (roi[0], roi[1])):
                     found.setdefault(d.marker_id, d)
             detections = [found[k] for k in sorted(found)]
         observations = self._poses(camera_id, detections)

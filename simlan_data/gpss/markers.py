@@ -6,6 +6,7 @@ are undistorted through the camera model.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -116,14 +117,27 @@ class MarkerDetector:
         self, camera_id: str, gray: NDArray[np.uint8], roi: tuple[int, int, int, int] | None = None
     ) -> list[Detection]:
         """Markers in ``gray`` (or in ``roi`` = u0, v0, u1, v1 of it), sorted by id."""
-        u0, v0 = 0, 0
-        image, detector = gray, self._full
         if roi is not None:
             u0, v0, u1, v1 = roi
-            image, detector = gray[v0:v1, u0:u1], self._roi
-            if image.size == 0:
-                return []
-        if detector is None:
+            return self.detect_region(camera_id, gray[v0:v1, u0:u1], (u0, v0))
+        return self._detect(camera_id, gray, self._full, 0, 0)
+
+    def detect_region(
+        self, camera_id: str, pixels: NDArray[np.uint8], origin: tuple[int, int]
+    ) -> list[Detection]:
+        """Markers in a region of interest given by its pixels, whose top-left pixel is
+        ``origin`` (u0, v0) of the image; corners in the image's pixels, sorted by id."""
+        return self._detect(camera_id, pixels, self._roi, origin[0], origin[1])
+
+    def _detect(
+        self,
+        camera_id: str,
+        image: NDArray[np.uint8],
+        detector: cv2.aruco.ArucoDetector | None,
+        u0: int,
+        v0: int,
+    ) -> list[Detection]:
+        if detector is None or image.size == 0:
             return []
         corners, ids, _ = detector.detectMarkers(image)
         if ids is None:
@@ -151,15 +165,15 @@ def marker_corners_in_marker_frame(size_m: float) -> NDArray[np.float64]:
     return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
 
 
-def _square_from_points(points_xy: NDArray[np.float64]) -> tuple[float, float, float]:
+def _square_from_points(points_xy: list[tuple[float, float]]) -> tuple[float, float, float]:
     """Centre and yaw of a square from its four corners in OpenCV order (marker x along TL->TR)."""
-    tl, tr, br, bl = points_xy
-    centre = points_xy.mean(axis=0)
-    x_axis = (tr - tl) + (br - bl)
-    y_axis = (tl - bl) + (tr - br)
+    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = points_xy  # TL, TR, BR, BL
+    ax, ay = (x1 - x0) + (x2 - x3), (y1 - y0) + (y2 - y3)  # x axis: TR - TL + BR - BL
+    bx, by = (x0 - x3) + (x1 - x2), (y0 - y3) + (y1 - y2)  # y axis: TL - BL + TR - BR
     # average the two axis estimates: y rotated by -90 degrees points along x
-    v = x_axis / np.linalg.norm(x_axis) + np.array([y_axis[1], -y_axis[0]]) / np.linalg.norm(y_axis)
-    return float(centre[0]), float(centre[1]), float(np.arctan2(v[1], v[0]))
+    na, nb = math.hypot(ax, ay), math.hypot(bx, by)
+    vx, vy = ax / na + by / nb, ay / na - bx / nb
+    return (x0 + x1 + x2 + x3) / 4.0, (y0 + y1 + y2 + y3) / 4.0, math.atan2(vy, vx)
 
 
 def _uncertainty(side_px: float, reproj_px: float, size_m: float) -> tuple[float, float]:
@@ -178,20 +192,32 @@ def _uncertainty(side_px: float, reproj_px: float, size_m: float) -> tuple[float
 def ground_constraint_pose(
     camera: CameraModel, det: Detection, mount: MarkerMount
 ) -> MarkerObservation | None:
-    """Intersect the corner rays with the marker's known plane z = height; None if a ray is invalid."""
-    points, ok = camera.intersect_plane_z(det.corners_px, mount.height_m)
-    if not ok.all():
+    """Intersect the corner rays with the marker's known plane z = height; None if a ray is invalid.
+
+    In plain floats (four corners: numpy's per-call overhead was most of its cost, with the GIL
+    held, for every marker every camera sees)."""
+    corners = det.corners_px.tolist()
+    points = camera.intersect_plane_z_few(corners, mount.height_m)
+    if points is None:
         return None
-    x, y, yaw = _square_from_points(points[:, :2])
-    world_from_marker = Transform.from_pose2d(x, y, yaw, mount.height_m)
-    ideal = world_from_marker.apply(marker_corners_in_marker_frame(mount.size_m))
-    uv, ok2 = camera.project(ideal)
-    if not ok2.all():
+    x, y, yaw = _square_from_points(points)
+    # the ideal square at that pose, back into the image
+    c, s, h = math.cos(yaw), math.sin(yaw), mount.size_m / 2.0
+    ideal = [
+        (x + c * (h * mx) - s * (h * my), y + s * (h * mx) + c * (h * my), mount.height_m)
+        for mx, my in _UNIT_SQUARE_XY
+    ]
+    uv = camera.project_few(ideal)
+    if uv is None:
         return None
-    reproj = float(np.sqrt(np.mean(np.sum((uv - det.corners_px) ** 2, axis=1))))
-    side = side_length_px(det)
+    reproj = math.sqrt(sum((u - cu) ** 2 + (v - cv) ** 2 for (u, v), (cu, cv) in zip(uv, corners)) / 4.0)
+    side = sum(math.dist(corners[i], corners[i - 1]) for i in range(4)) / 4.0
     sigma_xy, sigma_yaw = _uncertainty(side, reproj, mount.size_m)
     return MarkerObservation(det.camera_id, det.marker_id, x, y, yaw, sigma_xy, sigma_yaw, reproj, side)
+
+
+# the corners of marker_corners_in_marker_frame(2.0), (x, y)
+_UNIT_SQUARE_XY = ((-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0))
 
 
 def pnp_pose(camera: CameraModel, det: Detection, mount: MarkerMount) -> MarkerObservation | None:
