@@ -182,20 +182,19 @@ def decode_gray_regions(
     seg = segments(raw)
     if seg is None:
         return None
-    out = []
+    out: list[NDArray[np.uint8]] = []
     for u0, v0, u1, v1 in rois:
         if u0 < 0 or v0 < 0:
             raise ValueError(f"region {(u0, v0, u1, v1)} starts outside the image")
         x0, y0, x1, y1 = crop_bounds(seg, (u0, v0, u1, v1))
         if x1 <= x0 or y1 <= y0:
-            out.append(
-                np.zeros((max(0, min(v1, seg.height) - v0), max(0, min(u1, seg.width) - u0)), np.uint8)
-            )
+            rows, cols = max(0, min(v1, seg.height) - v0), max(0, min(u1, seg.width) - u0)
+            out.append(np.zeros((rows, cols), dtype=np.uint8))
             continue
         part = cv2.imdecode(
             np.frombuffer(sub_jpeg(seg, (x0, y0, x1, y1)), dtype=np.uint8), cv2.IMREAD_GRAYSCALE
         )
         if part is None or part.shape != (y1 - y0, x1 - x0):
             return None
-        out.append(part[v0 - y0 : v1 - y0, u0 - x0 : u1 - x0])
+        out.append(np.asarray(part[v0 - y0 : v1 - y0, u0 - x0 : u1 - x0], dtype=np.uint8))
     return out

@@ -45,6 +45,13 @@ from .markers import (
 Roi = tuple[int, int, int, int]
 
 
+def _decode_gray(data: NDArray[np.uint8] | None) -> NDArray[np.uint8]:
+    """A whole JPEG decoded to grey."""
+    if data is None:
+        raise ValueError("an image search needs the JPEG bytes or a grey image")
+    return np.asarray(cv2.imdecode(data, cv2.IMREAD_GRAYSCALE), dtype=np.uint8)
+
+
 @dataclass(frozen=True)
 class LocalizerParams:
     method: str = "ground"  # ground (ray / marker-plane intersection) | pnp (IPPE_SQUARE)
@@ -450,22 +457,16 @@ class Localizer:
         cached = self._full_cache.get(key) if key is not None else None
         if cached is not None:
             return ImageSearch(cached[0], cached[1], time.perf_counter() - t0)
-        crops = None
-        if gray is None and plan != "full":
+        detector = self._thread_detector()
+        if isinstance(plan, str):  # "full"
+            detections = detector.detect(camera_id, gray if gray is not None else _decode_gray(data))
+        else:
             # only the regions searched: same pixels as a whole decode (jpeg_regions), or None
             # for a JPEG without restart markers
-            assert data is not None
-            crops = decode_gray_regions(data, plan)  # type: ignore[arg-type]
-        if gray is None and crops is None:
-            assert data is not None
-            gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
-        detector = self._thread_detector()
-        if plan == "full":
-            detections = detector.detect(camera_id, gray)
-        else:
-            assert not isinstance(plan, str)
+            crops = decode_gray_regions(data, plan) if gray is None and data is not None else None
             if crops is None:
-                crops = [gray[v0:v1, u0:u1] for u0, v0, u1, v1 in plan]
+                whole = gray if gray is not None else _decode_gray(data)
+                crops = [whole[v0:v1, u0:u1] for u0, v0, u1, v1 in plan]
             found: dict[int, Detection] = {}
             for roi, pixels in zip(plan, crops):
                 for d in detector.detect_region(camera_id, pixels, (roi[0], roi[1])):
