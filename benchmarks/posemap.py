@@ -82,6 +82,14 @@ MODELS = {
 }
 
 
+def dump_raw(raw: dict, path: Path | None) -> None:
+    """The raw figures as a JSON block for BENCHMARKS.md, and into ``path`` if given."""
+    text = json.dumps(raw, indent=1, sort_keys=True)
+    print("\n```json\n" + text + "\n```")
+    if path:
+        path.write_text(text + "\n")
+
+
 def load_avg() -> str:
     one, five, fifteen = os.getloadavg()
     return f"{one:.1f} / {five:.1f} / {fifteen:.1f}"
@@ -352,9 +360,7 @@ def main() -> int:
     for d, r in raw["worst_joints"].items():
         for name, text in r.items():
             print(f"- worst joints, {d} / {name}: {text}")
-    print("\n```json\n" + json.dumps(raw, indent=1, sort_keys=True) + "\n```")
-    if args.json:
-        args.json.write_text(json.dumps(raw, indent=1, sort_keys=True) + "\n")
+    dump_raw(raw, args.json)
     return 0
 
 

@@ -17,12 +17,11 @@ bound (BENCHMARKS.md). Existing datasets and models in ``--workdir`` are reused.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from posemap import MODELS, dataset, information_bound, load_avg, train
+from posemap import MODELS, dataset, dump_raw, information_bound, load_avg, train
 
 from common import REPO, machine, table
 from simlan_data.gpss.posemap.ambiguity import ambiguity_floor
@@ -110,9 +109,7 @@ def main() -> int:
             rows,
         )
     )
-    print("\n```json\n" + json.dumps(raw, indent=1, sort_keys=True) + "\n```")
-    if args.json:
-        args.json.write_text(json.dumps(raw, indent=1, sort_keys=True) + "\n")
+    dump_raw(raw, args.json)
     return 0
 
 
