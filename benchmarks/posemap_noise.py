@@ -39,8 +39,9 @@ def main() -> int:
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     if any(s <= 0 for s in args.scales):
+        bad = next(s for s in args.scales if s <= 0)
         raise SystemExit(
-            f"invalid --scales {args.scales}: every scale must be > 0 (the fit weighs by 1/noise)"
+            f"invalid --scales {bad:g}: the fit weighs landmarks by 1/noise; give scales > 0, e.g. --scales 0.25 0.5 1 2"
         )
     args.workdir.mkdir(parents=True, exist_ok=True)
     raw: dict = {"machine": machine(), "load_before": load_avg(), "samples": args.samples, "scales": {}}
