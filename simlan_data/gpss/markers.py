@@ -189,6 +189,10 @@ def _uncertainty(side_px: float, reproj_px: float, size_m: float) -> tuple[float
     return 0.15 * metres_per_px * quality, 0.25 / max(side_px, 1.0) * quality
 
 
+# the corners of marker_corners_in_marker_frame(2.0), (x, y)
+_UNIT_SQUARE_XY = ((-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0))
+
+
 def ground_constraint_pose(
     camera: CameraModel, det: Detection, mount: MarkerMount
 ) -> MarkerObservation | None:
@@ -214,10 +218,6 @@ def ground_constraint_pose(
     side = sum(math.dist(corners[i], corners[i - 1]) for i in range(4)) / 4.0
     sigma_xy, sigma_yaw = _uncertainty(side, reproj, mount.size_m)
     return MarkerObservation(det.camera_id, det.marker_id, x, y, yaw, sigma_xy, sigma_yaw, reproj, side)
-
-
-# the corners of marker_corners_in_marker_frame(2.0), (x, y)
-_UNIT_SQUARE_XY = ((-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0))
 
 
 def pnp_pose(camera: CameraModel, det: Detection, mount: MarkerMount) -> MarkerObservation | None:
