@@ -155,8 +155,9 @@ class MarkerDetector:
 
 
 def side_length_px(det: Detection) -> float:
-    """Mean side length of a detected marker in pixels."""
-    return float(np.mean(np.linalg.norm(det.corners_px - np.roll(det.corners_px, 1, axis=0), axis=1)))
+    """Mean side length of a detected marker in pixels (plain floats: four corners)."""
+    c = det.corners_px.tolist()
+    return sum(math.dist(c[i], c[i - 1]) for i in range(4)) / 4.0
 
 
 def marker_corners_in_marker_frame(size_m: float) -> NDArray[np.float64]:
@@ -189,10 +190,6 @@ def _uncertainty(side_px: float, reproj_px: float, size_m: float) -> tuple[float
     return 0.15 * metres_per_px * quality, 0.25 / max(side_px, 1.0) * quality
 
 
-# the corners of marker_corners_in_marker_frame(2.0), (x, y)
-_UNIT_SQUARE_XY = ((-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0))
-
-
 def ground_constraint_pose(
     camera: CameraModel, det: Detection, mount: MarkerMount
 ) -> MarkerObservation | None:
@@ -206,16 +203,16 @@ def ground_constraint_pose(
         return None
     x, y, yaw = _square_from_points(points)
     # the ideal square at that pose, back into the image
-    c, s, h = math.cos(yaw), math.sin(yaw), mount.size_m / 2.0
+    c, s = math.cos(yaw), math.sin(yaw)
     ideal = [
-        (x + c * (h * mx) - s * (h * my), y + s * (h * mx) + c * (h * my), mount.height_m)
-        for mx, my in _UNIT_SQUARE_XY
+        (x + c * mx - s * my, y + s * mx + c * my, mount.height_m)
+        for mx, my, _ in marker_corners_in_marker_frame(mount.size_m).tolist()
     ]
     uv = camera.project_few(ideal)
     if uv is None:
         return None
     reproj = math.sqrt(sum((u - cu) ** 2 + (v - cv) ** 2 for (u, v), (cu, cv) in zip(uv, corners)) / 4.0)
-    side = sum(math.dist(corners[i], corners[i - 1]) for i in range(4)) / 4.0
+    side = side_length_px(det)
     sigma_xy, sigma_yaw = _uncertainty(side, reproj, mount.size_m)
     return MarkerObservation(det.camera_id, det.marker_id, x, y, yaw, sigma_xy, sigma_yaw, reproj, side)
 
