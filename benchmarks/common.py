@@ -54,10 +54,15 @@ def table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
 
 
 def run_cli(
-    *args: str, timeout: float = 3600, module: str = "simlan_data.run", prefix: Sequence[str] = ()
+    *args: str,
+    timeout: float = 3600,
+    module: str = "simlan_data.run",
+    prefix: Sequence[str] = (),
+    env_extra: dict[str, str] | None = None,
 ) -> subprocess.CompletedProcess[str]:
-    """``python -m module args`` from the repository (``prefix``: e.g. a taskset command)."""
-    env = {**os.environ}
+    """``python -m module args`` from the repository (``prefix``: e.g. a taskset command;
+    ``env_extra``: variables added to this process's environment)."""
+    env = {**os.environ, **(env_extra or {})}
     env.pop("HYDRA_FULL_ERROR", None)
     return subprocess.run(
         [*prefix, sys.executable, "-m", module, *args],

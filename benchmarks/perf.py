@@ -11,7 +11,10 @@ One run prints, as markdown, then the raw numbers as JSON:
 2. rtf        ``python -m simlan_data.run -m experiment=rtf`` (basic launcher): the real-time
               factor per camera count {1, 2, 4, 6, 9, 12} x stream set, beside SIMLAN's numbers.
 3. launchers  the same sweep through ``hydra/launcher=joblib`` (both cores): wall time of the
-              whole command against the basic launcher's.
+              whole command against the basic launcher's; then the basic launcher once more
+              with its jobs as joblib runs them (no helper threads: ``LP_NUM_THREADS=0``,
+              ``recording.encode_threads=0``), and the ceiling of the speedup that this run's
+              CPU seconds allow on 2 cores (see :func:`launcher_ceiling`).
 4. gpss       the headline configuration with the GPSS loop on (robots steer on the camera
               estimate): 12 cameras, RGB + depth + semantic, 960x540 at 5 Hz, four robots,
               recording on; depth and labels recorded at 1 Hz and at 5 Hz; and, for the cost of
@@ -187,14 +190,42 @@ def renderer(frames: int) -> tuple[str, dict]:
 
 
 # ----------------------------------------------------------------------------- 2./3. sweeps
-def sweep(out: Path, launcher: str, overrides: list[str]) -> tuple[float, Any]:
+def sweep(
+    out: Path, launcher: str, overrides: list[str], env_extra: dict[str, str] | None = None
+) -> tuple[float, Any]:
     """Run the rtf experiment through ``launcher``; returns the command's wall time and the table."""
     t0 = time.perf_counter()
-    proc = run_cli("-m", "experiment=rtf", f"hydra/launcher={launcher}", *overrides, f"hydra.sweep.dir={out}")
+    proc = run_cli(
+        "-m",
+        "experiment=rtf",
+        f"hydra/launcher={launcher}",
+        *overrides,
+        f"hydra.sweep.dir={out}",
+        env_extra=env_extra,
+    )
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise SystemExit(f"sweep through {launcher} failed: {proc.stderr.strip()[-2000:]}")
     return wall, collect_sweep(out)
+
+
+def launcher_ceiling(basic_s: float, basic: Any, parallel: Any, cores: int = 2) -> dict[str, float]:
+    """What the basic sweep's wall and the parallel sweep's CPU allow the parallel launcher.
+
+    The basic sweep is its jobs' loops (wall: ``sim.wall_s`` summed; they may spread over more
+    than one core) plus the rest (start-up, evaluation, reports: the command's wall minus the
+    loops'). A parallel launcher can at best keep all ``cores`` busy with its own loops' CPU
+    (``sim.cpu_s`` summed) and the same rest: ``basic_s / ((loops CPU + rest) / cores)``."""
+    loops_wall = float(basic["sim.wall_s"].sum())
+    rest = basic_s - loops_wall
+    parallel_cpu = float(parallel["sim.cpu_s"].sum())
+    return {
+        "basic_loops_wall_s": loops_wall,
+        "basic_loops_cpu_s": float(basic["sim.cpu_s"].sum()),
+        "basic_rest_s": rest,
+        "parallel_loops_cpu_s": parallel_cpu,
+        "ceiling": basic_s / ((parallel_cpu + rest) / cores),
+    }
 
 
 # -------------------------------------------------------------------------------- 4. gpss runs
@@ -357,28 +388,68 @@ def main() -> None:
         print(rtf_markdown(rows), flush=True)
         if want("launchers"):
             joblib_s, par = sweep(out / "sweep_joblib", "joblib", sweep_args)
+            # the basic launcher with its jobs as joblib runs them (one thread each): what the
+            # speedup would be against jobs that do not spread over the second core themselves
+            serial_s, serial = sweep(
+                out / "sweep_basic_serial",
+                "basic",
+                [*sweep_args, "recording.encode_threads=0"],
+                env_extra={"LP_NUM_THREADS": "0"},
+            )
             jobs = basic.height
+            ceiling = launcher_ceiling(basic_s, basic, par)
             raw["launchers"] = {
                 "jobs": jobs,
                 "basic_s": basic_s,
                 "joblib_s": joblib_s,
                 "speedup": basic_s / joblib_s,
+                "basic_serial_s": serial_s,
+                "speedup_over_serial_jobs": serial_s / joblib_s,
+                **ceiling,
                 "joblib_rtf": rtf_rows(par).to_dicts(),
+                "basic_serial_rtf": rtf_rows(serial).to_dicts(),
             }
             print("### The same sweep through the basic and the joblib launcher\n")
+
+            def loops(t: Any) -> str:
+                return f"{t['sim.wall_s'].sum():.0f} / {t['sim.cpu_s'].sum():.0f}"
+
             print(
                 table(
-                    ["launcher", f"whole command, {jobs} jobs (s)", "speedup"],
                     [
-                        ["basic (one job at a time)", f"{basic_s:.0f}", "1.00"],
+                        "launcher",
+                        "each job's helper threads",
+                        f"whole command, {jobs} jobs (s)",
+                        "the jobs' loops: wall / CPU (s)",
+                        "joblib's speedup over it",
+                    ],
+                    [
+                        [
+                            "basic (one job at a time)",
+                            "Mesa 1 + encoders 2 (a single run's default)",
+                            f"{basic_s:.0f}",
+                            loops(basic),
+                            f"**{basic_s / joblib_s:.2f}**",
+                        ],
+                        [
+                            "basic, jobs as joblib runs them",
+                            "none",
+                            f"{serial_s:.0f}",
+                            loops(serial),
+                            f"{serial_s / joblib_s:.2f}",
+                        ],
                         [
                             "joblib (n_jobs=-1: one job per core)",
+                            "none",
                             f"{joblib_s:.0f}",
-                            f"**{basic_s / joblib_s:.2f}**",
+                            loops(par),
+                            "1.00",
                         ],
                     ],
                 )
-                + "\n",
+                + f"\n\nCeiling of joblib's speedup over the basic launcher from this run's CPU seconds "
+                f"(basic_s / ((joblib loops' CPU + the basic sweep's rest) / 2)): {ceiling['ceiling']:.2f}x "
+                f"(rest {ceiling['basic_rest_s']:.0f} s).\n",
                 flush=True,
             )
     if want("gpss"):
