@@ -12,6 +12,7 @@ import os
 import sys
 from collections.abc import Iterator
 
+_LIBC: ctypes.CDLL | None
 try:
     _LIBC = ctypes.CDLL(None)
 except OSError:  # pragma: no cover - no C library to flush

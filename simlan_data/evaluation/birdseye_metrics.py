@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -40,7 +41,7 @@ GCP_MIN_SCORE = 0.5  # normalized correlation below this: the point is not found
 
 
 def grey(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    return image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    return image if image.ndim == 2 else cast(NDArray[np.uint8], cv2.cvtColor(image, cv2.COLOR_RGB2GRAY))
 
 
 def slab_joint_crossings(placements: Sequence[Placement], spec: CanvasSpec) -> NDArray[np.float64]:
@@ -190,7 +191,7 @@ def locate_gcps(
         inp = image_grey[r + iy - h - m : r + iy + h + m + 1, c + ix - h - m : c + ix + h + m + 1]
         warp = np.array([[1.0, 0.0, m], [0.0, 1.0, m]], dtype=np.float32)
         try:
-            _, warp = cv2.findTransformECC(
+            _, warp = cv2.findTransformECC(  # type: ignore[call-overload]  # (stubs: no mask is allowed)
                 tpl,
                 inp.astype(np.float32),
                 warp,

@@ -24,7 +24,7 @@ import math
 import re
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -217,7 +217,7 @@ def _panel(image: NDArray[np.uint8], title: str, width: int) -> NDArray[np.uint8
     h = round(rgb.shape[0] * width / rgb.shape[1])
     small = np.ascontiguousarray(cv2.resize(rgb, (width, h), interpolation=cv2.INTER_AREA))
     cv2.putText(small, title, (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.9, (255, 40, 40), 2, cv2.LINE_AA)
-    return small
+    return cast(NDArray[np.uint8], small)
 
 
 def write_report(

@@ -141,7 +141,7 @@ class CameraModel:
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         pts = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
         uv, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.K, self.D)
-        return uv.reshape(-1, 2)
+        return np.asarray(uv, dtype=np.float64).reshape(-1, 2)
 
     def undistort_pixels(self, uv: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Map distorted pixels (N, 2) to ideal normalized coordinates (N, 2).

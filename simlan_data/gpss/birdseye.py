@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -355,13 +356,13 @@ class BirdseyeStitcher:
         slot_w = np.zeros((H, W, K), dtype=np.float32)
         slot_c = np.full((H, W, K), -1, dtype=np.int16)
         for k, fp in enumerate(self.footprints):
-            factor = edge_factor[k]
-            if fp is None or factor is None:
+            fade = edge_factor[k]
+            if fp is None or fade is None:
                 continue
             region = (primary[fp.rows, fp.cols] == k).astype(np.uint8)
             outside = cv2.distanceTransform(1 - region, cv2.DIST_L2, 5)
             ramp = np.clip(1.0 - outside / band, 0.0, 1.0)
-            w = (ramp * np.maximum(factor, 1e-3) * fp.valid).astype(np.float32)
+            w = (ramp * np.maximum(fade, 1e-3) * fp.valid).astype(np.float32)
             sw, sc = slot_w[fp.rows, fp.cols], slot_c[fp.rows, fp.cols]
             m = w > 0
             weakest = np.argmin(sw[m], axis=1)
@@ -431,7 +432,7 @@ class BirdseyeStitcher:
         m1, m2 = cv2.convertMaps(fold(sx[1:], OUTSIDE), fold(sy[1:], OUTSIDE), cv2.CV_16SC2)
         w = fold(weights, 0).reshape(cams.shape[0], -1, SEAM_ROW, 1).astype(np.uint16)
         padded = np.pad(index, (0, pad), mode="edge")
-        return SeamPixels(index, padded, cams, w, m1, m2)
+        return SeamPixels(index, padded, cams, w, cast(NDArray[np.int16], m1), cast(NDArray[np.uint16], m2))
 
     # ------------------------------------------------------------------------------ per frame
     def _fill_atlas(self, frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
@@ -468,7 +469,7 @@ class BirdseyeStitcher:
             acc += WEIGHT_ONE // 2
             blended = (acc >> 8).astype(np.uint8).reshape(-1).view(_RGB)
             np.put(flat, s.index, blended[: s.index.size])
-        return canvas
+        return cast(NDArray[np.uint8], canvas)
 
     def stitch_labels(self, labels: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
         """Semantic labels on the canvas, nearest pixel of each pixel's primary camera."""
@@ -476,7 +477,9 @@ class BirdseyeStitcher:
         if not hasattr(self, "_nearest_maps"):
             self._nearest_maps = cv2.convertMaps(*self._primary_float, cv2.CV_16SC2, nninterpolation=True)
         m1, m2 = self._nearest_maps
-        return cv2.remap(atlas, m1, m2, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
+        return cast(
+            NDArray[np.uint8], cv2.remap(atlas, m1, m2, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
+        )
 
     def project_each(
         self, frames: Sequence[NDArray[np.uint8]], *, interpolation: int = cv2.INTER_LINEAR
@@ -488,7 +491,7 @@ class BirdseyeStitcher:
                 out.append(None)
                 continue
             img = cv2.remap(frame, fp.map_x, fp.map_y, interpolation, borderMode=cv2.BORDER_CONSTANT)
-            out.append((fp, img))
+            out.append((fp, cast(NDArray[np.uint8], img)))
         return out
 
     @property

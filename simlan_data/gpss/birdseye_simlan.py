@@ -59,13 +59,13 @@ class SimlanBirdseye:
         for frame, index, inside in zip(frames, self._index, self._inside):
             grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
             values = np.where(inside, grey.ravel()[index], 0).astype(np.float64)
-            out.append(cv2.normalize(values, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8))
+            out.append(cv2.normalize(values, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8))  # type: ignore[call-overload]  # (stubs: dst None is allowed)
         return out
 
     def stitch(self, frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
         """Greyscale canvas (H, W) uint8, as SIMLAN's stitcher publishes it."""
         means = np.mean(self.project_each(frames), axis=0)
-        return cv2.normalize(means, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+        return cv2.normalize(means, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)  # type: ignore[call-overload]
 
     @property
     def inside(self) -> list[NDArray[np.bool_]]:

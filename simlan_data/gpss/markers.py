@@ -226,7 +226,9 @@ def pnp_pose(camera: CameraModel, det: Detection, mount: MarkerMount) -> MarkerO
     if not ok:
         return None
     R_cm, _ = cv2.Rodrigues(rvec)
-    world_from_marker = camera.world_from_camera @ Transform(R_cm, tvec.reshape(3))
+    world_from_marker = camera.world_from_camera @ Transform(
+        np.asarray(R_cm, dtype=np.float64), np.asarray(tvec, dtype=np.float64).reshape(3)
+    )
     proj, _ = cv2.projectPoints(obj, rvec, tvec, camera.K, camera.D)
     reproj = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - det.corners_px) ** 2, axis=1))))
     x, y = (float(v) for v in world_from_marker.translation[:2])

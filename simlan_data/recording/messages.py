@@ -7,6 +7,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..constants import NS_PER_S
 from ..geometry.camera import CameraModel
@@ -284,7 +285,7 @@ def pose_with_covariance(
 
 
 def marker_detections(
-    stamp_ns: int, frame_id: str, ids: Sequence[int], corners_px: np.ndarray, mode: str
+    stamp_ns: int, frame_id: str, ids: Sequence[int], corners_px: ArrayLike, mode: str
 ) -> Any:
     corners = np.asarray(corners_px, dtype=np.float32).reshape(-1)
     return MarkerDetections(

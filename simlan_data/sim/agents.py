@@ -105,7 +105,7 @@ class Agent:
         collision shape at all, is added from its known geometry.
         """
         m = VISUAL_MARGIN_M
-        out = []
+        out: list[tuple[Sequence[float], Sequence[float]]] = []
         for link in (-1, *self.joints.values()):
             lo, hi = pb.getAABB(self.body, link, physicsClientId=self.client)
             out.append(([lo[0] - m, lo[1] - m, lo[2] - m], [hi[0] + m, hi[1] + m, hi[2] + m]))

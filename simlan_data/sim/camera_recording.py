@@ -11,7 +11,9 @@ for the result instead of decoding every searched image itself (about 1.5 ms eac
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
+from concurrent.futures import Future
 from typing import Any, NamedTuple
 
 import cv2
@@ -33,6 +35,11 @@ class EncodedRgb(NamedTuple):
     format: str
     data: bytes
     gray: NDArray[np.uint8] | None = None
+
+
+def _compressed(stamp_ns: int, frame_id: str, encoded: Future[Any] | Any) -> Any:
+    """The CompressedImage message of an encoding job's (format, data)."""
+    return M.compressed_image(stamp_ns, frame_id, *encoded.result()[:2])
 
 
 class _Restamped:
@@ -115,7 +122,7 @@ class CameraRecorder:
         self.writer.write_serialized(topics["camera_info"], t, M.restamp(self._info[cid], t))
         version = self._version.get(cid, -1) + int(images.changed or cid not in self._version)
         self._version[cid] = version
-        arrays = {"rgb": images.rgb}
+        arrays: dict[str, np.ndarray | None] = {"rgb": images.rgb}
         if "depth" in topics and frame_index % self.depth_every == 0:
             arrays["depth"] = images.depth_m
         if "semantic" in topics and frame_index % self.semantic_every == 0:
@@ -128,15 +135,14 @@ class CameraRecorder:
                 _, encoded, pending = cached
                 self.writer.write_pending(topic, t, _Restamped(pending, t))
             else:
+                assert array is not None  # (the streams recorded are the streams rendered)
                 encode = self._encoder(stream)
                 if encode is None:
                     encoded = None
-                    pending = self.writer.submit(topic, t, lambda a=array, t=t: M.raw_image(t, frame, a))
+                    pending = self.writer.submit(topic, t, functools.partial(M.raw_image, t, frame, array))
                 else:
                     encoded = self.writer.run_async(encode, array)
-                    pending = self.writer.submit(
-                        topic, t, lambda e=encoded, t=t: M.compressed_image(t, frame, *e.result()[:2])
-                    )
+                    pending = self.writer.submit(topic, t, functools.partial(_compressed, t, frame, encoded))
                 self.encoded += 1
                 self._cache[key] = (version, encoded, pending)
             if stream == "rgb":

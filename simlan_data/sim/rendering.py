@@ -146,7 +146,7 @@ class CameraRenderer:
         if not self.distort:
             self.canvas_K = cam.K.copy()
             self.canvas_size = (cam.width, cam.height)
-            self.valid_mask = np.ones((cam.height, cam.width), dtype=bool)
+            self.valid_mask: NDArray[np.bool_] = np.ones((cam.height, cam.width), dtype=bool)
             self._maps = None
             return
         u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
@@ -163,7 +163,7 @@ class CameraRenderer:
         map_y = (K[1, 1] * xy[:, 1] + K[1, 2]).astype(np.float32)
         map_x[~ok], map_y[~ok] = -10.0, -10.0  # outside the canvas: filled with 0 by remap
         shape = (cam.height, cam.width)
-        self.valid_mask = ok.reshape(shape)
+        self.valid_mask = np.asarray(ok, dtype=bool).reshape(shape)
         fixed = cv2.convertMaps(map_x.reshape(shape), map_y.reshape(shape), cv2.CV_16SC2)
         nearest = cv2.convertMaps(
             map_x.reshape(shape), map_y.reshape(shape), cv2.CV_16SC2, nninterpolation=True

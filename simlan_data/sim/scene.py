@@ -110,7 +110,7 @@ def load_inputs(cfg: Config) -> Inputs:
             continue
         clearance = grid.clearance_m()
         for i, goal in enumerate(a.goals):
-            cell = grid.to_cell(goal)
+            cell = grid.to_cell((goal[0], goal[1]))
             if not grid.inside(cell) or clearance[cell] < kind.half_width_m:
                 raise ConfigError(
                     f"invalid agents.{a.namespace}.goals[{i}]={list(goal)}",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -77,7 +77,7 @@ def create_body(
     parts: Sequence[Part],
     *,
     position: Sequence[float],
-    orientation: Sequence[float],
+    orientation: Iterable[float],
     mass_kg: float,
     visual: int = -1,
 ) -> int:
