@@ -59,7 +59,7 @@ class SimlanBirdseye:
         for frame, index, inside in zip(frames, self._index, self._inside):
             grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
             values = np.where(inside, grey.ravel()[index], 0).astype(np.float64)
-            out.append(cv2.normalize(values, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8))  # type: ignore[call-overload]  # (stubs: dst None is allowed)
+            out.append(cv2.normalize(values, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8))  # type: ignore[call-overload]
         return out
 
     def stitch(self, frames: Sequence[NDArray[np.uint8]]) -> NDArray[np.uint8]:
