@@ -17,7 +17,7 @@ import bisect
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Any
+from typing import Any, overload
 
 import cv2
 import numpy as np
@@ -218,10 +218,8 @@ class CameraModel:
                     break
             if not (math.isfinite(x) and math.isfinite(y)):
                 continue
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            ex = (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd) * fx
-            ey = (y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd) * fy
+            x_re, y_re = distort_points(x, y, k1, k2, p1, p2, k3)
+            ex, ey = (x_re - xd) * fx, (y_re - yd) * fy
             out[i] = x, y
             ok[i] = math.hypot(x, y) <= valid_radius and math.hypot(ex, ey) < 1e-3
         return out, ok
@@ -340,10 +338,7 @@ class CameraModel:
             y = (a10 * px + a11 * py + a12 * pz + ty) / z
             if not math.hypot(x, y) <= valid_radius:
                 return None
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-            yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+            xd, yd = distort_points(x, y, k1, k2, p1, p2, k3)
             out.append((fx * xd + cx, fy * yd + cy))
         return out
 
@@ -353,6 +348,13 @@ class CameraModel:
         return (_GL_FROM_CV @ self.camera_from_world.matrix()).T.ravel().tolist()
 
 
+@overload
+def distort_points(
+    x: float, y: float, k1: float, k2: float, p1: float, p2: float, k3: float
+) -> tuple[float, float]: ...
+
+
+@overload
 def distort_points(
     x: FloatArray,
     y: FloatArray,
@@ -361,10 +363,14 @@ def distort_points(
     p1: float | FloatArray,
     p2: float | FloatArray,
     k3: float | FloatArray,
-) -> tuple[FloatArray, FloatArray]:
+) -> tuple[FloatArray, FloatArray]: ...
+
+
+def distort_points(x: Any, y: Any, k1: Any, k2: Any, p1: Any, p2: Any, k3: Any) -> tuple[Any, Any]:
     """The radial + tangential model on normalized coordinates: distorted (x, y), normalized.
 
-    The coefficients broadcast against ``x`` and ``y`` (several cameras at once)."""
+    Floats (one point, as the few-point methods use it) or arrays; the coefficients broadcast
+    against ``x`` and ``y`` (several cameras at once)."""
     r2 = x * x + y * y
     radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
     return (
