@@ -25,8 +25,10 @@ from posemap import MODELS, dataset, dump_raw, information_bound, load_avg, trai
 
 from common import REPO, machine, table
 from simlan_data.gpss.posemap.ambiguity import ambiguity_floor
+from simlan_data.posemap_config import PosemapConfig
 
-DEFAULT_SEEN_PX, DEFAULT_HIDDEN_PX = 1.0, 8.0
+# the projection estimator's default noise (the scales multiply it), from the config itself
+DEFAULT_SEEN_PX, DEFAULT_HIDDEN_PX = PosemapConfig.noise_px, PosemapConfig.hidden_noise_px
 TARGET_RAD = 0.10
 
 
@@ -38,8 +40,8 @@ def main() -> int:
     parser.add_argument("--workdir", type=Path, default=REPO / "recordings" / "posemap_noise")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
-    if any(s <= 0 for s in args.scales):
-        bad = next(s for s in args.scales if s <= 0)
+    bad = next((s for s in args.scales if s <= 0), None)
+    if bad is not None:
         raise SystemExit(
             f"invalid --scales {bad:g}: the fit weighs landmarks by 1/noise; give scales > 0, e.g. --scales 0.25 0.5 1 2"
         )
