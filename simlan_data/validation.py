@@ -15,6 +15,7 @@ Every failure is one line: ``error: <what> in <where>: <why>; <what to do>``.
 
 from __future__ import annotations
 
+import copy
 import difflib
 import math
 import re
@@ -188,6 +189,48 @@ def _bad_value(err: ValidationError) -> ConfigError:
     else:
         fix = f"give {'an' if want[0] in 'AEIOU' else 'a'} {want.lower()}" + (f" in {unit}" if unit else "")
     return ConfigError(f"invalid {full}={value!r}", "config", f"expected {want}, got {got}", fix)
+
+
+# ------------------------------------------------------------------------------ interpolations
+def resolve_interpolations(cfg: DictConfig) -> DictConfig:
+    """A copy of ``cfg`` with every interpolation replaced by what it gives, each value checked
+    against the schema as it is assigned (``OmegaConf.to_object`` alone does not check what an
+    interpolation gives for a whole section: ``faults=${now:%Y}`` reached the checks as a string).
+
+    Raises:
+        ConfigError: naming the key whose interpolation gives a value of the wrong type.
+    """
+    resolved = copy.deepcopy(cfg)
+    try:
+        OmegaConf.resolve(resolved)
+    except ValidationError as err:
+        if _full_key(err):  # a value OmegaConf names (as to_object would have): the usual message
+            raise _bad_value(err) from None
+        # a whole section, which OmegaConf does not name: resolution goes in order and stops at
+        # the failing node, the first one still unresolved
+        key, text = _first_interpolation(resolved)
+        raise ConfigError(
+            f"invalid {key}={text!r}",
+            "config",
+            _first_line(err),
+            "give a value of the key's type (an interpolation has to give one too)",
+        ) from None
+    return resolved
+
+
+def _first_interpolation(node: DictConfig | ListConfig, prefix: str = "") -> tuple[str, str]:
+    """The full key and text of the first interpolation left in ``node`` (depth first)."""
+    keys: Iterable[Any] = node.keys() if isinstance(node, DictConfig) else range(len(node))
+    for k in keys:
+        full = f"{prefix}[{k}]" if isinstance(node, ListConfig) else (f"{prefix}.{k}" if prefix else str(k))
+        if OmegaConf.is_interpolation(node, k):
+            return full, str(node._get_node(k)._value())  # type: ignore[union-attr]
+        child = node._get_node(k)
+        if isinstance(child, (DictConfig, ListConfig)):
+            found = _first_interpolation(child, full)
+            if found[0]:
+                return found
+    return "", ""
 
 
 # ------------------------------------------------------------------------------ finite values

@@ -116,6 +116,8 @@ CONFIG_CASES = [
         ("agents overlap", ["agents=four_robots", "agents.robot_agent_2.pose=[-20.5,1.5,0.0]"], r"invalid agents.robot_agent_2.pose=\[-20.5, 1.5, 0.0\] in config: its footprint overlaps robot_agent_1's"),
         ("new agent on the command line", ["+agents.robot_agent_5={type:jackal,pose:[0.0,0.0,0.0]}"], r"cannot add agent .*robot_agent_5 in command line: new agents go in a spawn list file"),
         ("group given a list (found by fuzzing)", ["agents=[0]"], r"invalid configuration in command line: TypeError: argument of type 'int' is not iterable"),
+        ("section given by an interpolation (found by fuzzing)", ["faults=${now:%Y}"], r"invalid faults='\$\{now:%Y\}' in config: Invalid type assigned: str is not a subclass of FaultsConfig\. value: \d+; give a value of the key's type \(an interpolation has to give one too\)"),
+        ("list given by an interpolation", ["faults.drop_cameras=${now:%Y}"], r"invalid faults.drop_cameras='\$\{now:%Y\}' in config: Invalid value assigned: str is not a ListConfig, list or tuple"),
         ("override syntax", ["x=[1,2"], r"invalid override in command line: .*; write KEY=VALUE"),
         ("missing mandatory", ["cameras.ids=???"], r"missing value for cameras.ids in config: the key has no default"),
     ]

@@ -74,6 +74,7 @@ def test_reference_checks_registered_by_other_sections_run_with_the_config() -> 
         (["scenario=multi_robot", "agents=single_truck"], "unknown agent robot_agent_2 in config"),
         (["agents.robot_agent_1.pose=[-16,0.4,90]"], "(this looks like degrees)"),
         (["world.layout=/nonexistent/layout.csv"], "layout file missing in /nonexistent/layout.csv"),
+        (["faults=${now:%Y}"], "invalid faults='${now:%Y}' in config: Invalid type assigned"),
     ],
 )
 def test_run_cli_exit_2_and_nothing_written(tmp_path: Path, args: list[str], expected: str) -> None:
