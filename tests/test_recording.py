@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from PIL import Image
 
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import RecordingError, RecordingInputError
@@ -18,8 +21,10 @@ from simlan_data.recording import schema
 from simlan_data.recording.codecs import (
     decode_compressed,
     decode_raw,
+    depth_to_mm,
     encode_depth,
     encode_labels,
+    encode_png,
     encode_rgb,
 )
 from simlan_data.recording.reader import RecordingReader
@@ -145,6 +150,57 @@ def test_codecs_round_trip() -> None:
     assert np.array_equal(decode_compressed(*encode_labels(labels)), labels)
     raw = M.raw_image(0, "f", depth)
     assert np.array_equal(decode_raw(raw.encoding, raw.height, raw.width, raw.step, raw.data), depth)
+
+
+@pytest.mark.parametrize(
+    ("shape", "dtype"),
+    [
+        ((540, 960), np.uint16),
+        ((37, 53), np.uint8),
+        ((1, 1), np.uint16),
+        ((1, 7), np.uint8),
+        ((9, 1), np.uint16),
+        ((24, 31, 3), np.uint8),
+        ((1, 1, 3), np.uint8),
+    ],
+)
+def test_png_decodes_to_the_image_in_two_independent_decoders(shape: tuple[int, ...], dtype: type) -> None:
+    """Our PNG writer (ISA-L deflate) against libpng (OpenCV) and Pillow, CRCs checked by Pillow."""
+    rng = np.random.default_rng(sum(shape))
+    top = np.iinfo(dtype).max
+    image = rng.integers(0, top, shape, dtype=dtype, endpoint=True)
+    image.flat[0], image.flat[-1] = 0, top  # both extremes, and runs that deflate finds
+    if image.shape[0] > 4:
+        image[2:4] = image[1]
+    data = encode_png(image)
+    via_opencv = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if image.ndim == 3:
+        via_opencv = cv2.cvtColor(via_opencv, cv2.COLOR_BGR2RGB)
+    assert via_opencv.dtype == dtype and np.array_equal(via_opencv.reshape(shape), image)
+    Image.open(io.BytesIO(data)).verify()  # chunk CRCs and structure
+    via_pillow = np.asarray(Image.open(io.BytesIO(data)))
+    assert np.array_equal(via_pillow.astype(dtype).reshape(shape), image)
+
+
+def test_png_writer_takes_views_and_refuses_what_png_cannot_hold() -> None:
+    base = np.arange(40 * 30, dtype=np.uint16).reshape(40, 30) * 50
+    view = base[::-2, 3:17]  # negative and non-unit strides
+    back = cv2.imdecode(np.frombuffer(encode_png(view), np.uint8), cv2.IMREAD_UNCHANGED)
+    assert np.array_equal(back, view)
+    for bad, match in (
+        (np.zeros((4, 4), np.float32), "float32 image"),
+        (np.zeros((4, 4, 4), np.uint8), r"shape \(4, 4, 4\)"),
+        (np.zeros((0, 4), np.uint8), "empty image"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            encode_png(bad)
+
+
+def test_depth_to_mm_rounds_saturates_and_zeroes_invalid_depths() -> None:
+    depth = np.array(
+        [[0.0, 0.0004, 0.0006, 1.2344, 1.2346, 65.535, 70.0, -0.5, np.nan, np.inf, -np.inf]], np.float32
+    )
+    assert depth_to_mm(depth).tolist() == [[0, 0, 1, 1234, 1235, 65535, 65535, 0, 0, 0, 0]]
 
 
 def test_camera_info_carries_the_calibration() -> None:
