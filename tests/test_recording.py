@@ -187,6 +187,8 @@ def test_png_writer_takes_views_and_refuses_what_png_cannot_hold() -> None:
     view = base[::-2, 3:17]  # negative and non-unit strides
     back = cv2.imdecode(np.frombuffer(encode_png(view), np.uint8), cv2.IMREAD_UNCHANGED)
     assert np.array_equal(back, view)
+    swapped = view.astype(">u2")  # big-endian input: same pixels
+    assert encode_png(swapped) == encode_png(view)
     for bad, match in (
         (np.zeros((4, 4), np.float32), "float32 image"),
         (np.zeros((4, 4, 4), np.uint8), r"shape \(4, 4, 4\)"),

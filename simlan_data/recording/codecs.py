@@ -24,10 +24,9 @@ PNG_RGB_FORMAT = "rgb8; png compressed bgr8"
 DEPTH_FORMAT = "16UC1; compressedDepth png"
 LABELS_FORMAT = "mono8; png compressed mono8"
 DEPTH_HEADER = struct.Struct("<iff")  # compressionFormat (INV_DEPTH = 0), depthParam[2]
-DEPTH_MAX_M = 65.535
 # PNGs are written here, not by OpenCV: libpng deflates with zlib, whose level 1 spends 8 ms on a
-# 960x540 16-bit depth frame; ISA-L's level 1 (python-isal) gives the same size in 1.9 ms, and
-# labels 7x faster (measured on recorded warehouse frames, benchmarks/spine.py). The container is
+# 960x540 16-bit depth frame; ISA-L's level 1 (python-isal) gives the same size in 1.9 ms (the
+# whole encode: depth 3.7x, labels 12x faster; BENCHMARKS.md, benchmarks/spine.py). The container is
 # the PNG standard's minimum (IHDR, one IDAT, IEND), every row with the "up" filter: the fastest
 # filter at no cost in size on these images (adaptive filters: 14.4 ms against 11.4 ms in libpng).
 # Storing PNGs uncompressed and leaving compression to the bag's zstd chunks is smaller but makes
@@ -63,9 +62,10 @@ def encode_png(image: NDArray[np.uint8] | NDArray[np.uint16], *, level: int = PN
     Raises:
         ValueError: another shape or dtype, or an empty image (PNG has no 0-pixel images).
     """
-    if image.ndim == 2 and image.dtype in (np.uint8, np.uint16):
+    unsigned = image.dtype.kind == "u"  # either byte order: rows are written big-endian
+    if image.ndim == 2 and unsigned and image.itemsize in (1, 2):
         colour_type = 0
-    elif image.ndim == 3 and image.shape[2] == 3 and image.dtype == np.uint8:
+    elif image.ndim == 3 and image.shape[2] == 3 and unsigned and image.itemsize == 1:
         colour_type = 2
     else:
         raise ValueError(
@@ -74,7 +74,7 @@ def encode_png(image: NDArray[np.uint8] | NDArray[np.uint16], *, level: int = PN
     height, width = image.shape[:2]
     if height == 0 or width == 0:
         raise ValueError(f"no PNG for an empty image ({width}x{height})")
-    big_endian = image.astype(">u2", copy=False) if image.dtype == np.uint16 else image
+    big_endian = image.astype(">u2", copy=False) if image.itemsize == 2 else image
     rows = np.ascontiguousarray(big_endian).view(np.uint8).reshape(height, -1)
     filtered = np.empty((height, rows.shape[1] + 1), np.uint8)
     filtered[:, 0] = PNG_FILTER_UP  # each byte minus the one above it (the first row: minus 0)
