@@ -131,7 +131,7 @@ def encode_labels(labels: NDArray[np.uint8], *, level: int = PNG_LEVEL) -> tuple
 def _imdecode(data: bytes | NDArray[np.uint8], flags: int, what: str) -> np.ndarray:
     buf = np.frombuffer(bytes(data) if not isinstance(data, np.ndarray) else data.tobytes(), dtype=np.uint8)
     # check the declared size before OpenCV allocates it (untrusted input)
-    if buf[:8].tobytes() == b"\x89PNG\r\n\x1a\n" and len(buf) >= 24:
+    if buf[: len(PNG_SIGNATURE)].tobytes() == PNG_SIGNATURE and len(buf) >= 24:
         width, height = struct.unpack(">II", buf[16:24].tobytes())
         if width * height > MAX_DECODED_PIXELS:
             raise RecordingInputError(
