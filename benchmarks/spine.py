@@ -12,7 +12,9 @@ import json
 import sys
 import tempfile
 import time
+import zlib
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -142,6 +144,48 @@ def encodings(frames: int) -> tuple[str, dict]:
     ), raw
 
 
+def chunks(out_dir: Path, repeats: int) -> tuple[str, dict]:
+    """The recording's chunk compression and checksum, on the chunks of a real recording (12
+    cameras, all streams at 5 Hz, 4 s): zstd's levels, rosbags' level 3 the baseline."""
+    from isal import isal_zlib
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    from simlan_data.recording.writer import zstd
+
+    run_dir = out_dir / "chunks"
+    proc = run_cli(
+        "experiment=rtf",
+        "cameras.count=12",
+        "streams=rgbds_full",
+        "duration_s=4",
+        "recording.compression=none",
+        f"hydra.run.dir={run_dir}",
+    )
+    if proc.returncode != 0:
+        raise SystemExit(proc.stderr)
+    with (run_dir / "recording" / "recording.mcap").open("rb") as f:
+        raws = [r.data for r in StreamReader(f, emit_chunks=True).records if isinstance(r, Chunk)]
+    total = sum(map(len, raws))
+    cases: dict[str, Any] = {
+        "zstd level 3 (rosbags' default, the baseline)": lambda b: zstd.compress(b, level=3),
+        "zstd level 2 (ours until 2026-11-24)": lambda b: zstd.compress(b, level=2),
+        "zstd level 1": lambda b: zstd.compress(b, level=1),
+        "zstd level -1 (default)": lambda b: zstd.compress(b, level=-1),
+        "CRC32, zlib (the baseline)": zlib.crc32,
+        "CRC32, ISA-L (default)": isal_zlib.crc32,
+    }
+    rows, raw = [], {"chunks": len(raws), "mib": total / 2**20}
+    for name, fn in cases.items():
+        out = [fn(b) for b in raws]
+        seconds = best_of(lambda fn=fn: [fn(b) for b in raws], repeats)
+        ratio = sum(len(o) for o in out) / total if isinstance(out[0], bytes) else None
+        raw[name] = {"mb_per_s": total / seconds / 1e6, "ratio": ratio}
+        rows.append([name, "-" if ratio is None else f"{ratio:.3f}", f"{total / seconds / 1e6:.0f}"])
+    md = table(["chunk step", "compressed / raw", "MB/s"], rows)
+    return md + f"\n\nOver {len(raws)} chunks, {total / 2**20:.0f} MiB uncompressed.", raw
+
+
 def default_run(out_dir: Path, repeat: int) -> tuple[str, dict]:
     """The default scenario end to end, with recording and without (the baseline), interleaved,
     ``repeat`` times each; medians reported."""
@@ -196,7 +240,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer frames, no default run")
     parser.add_argument("--json", type=Path, help="also write raw numbers here")
     parser.add_argument("--repeat", type=int, default=3, help="default-run repetitions (medians)")
-    parser.add_argument("--only", choices=["renderers", "encodings", "default_run"], help="one section")
+    parser.add_argument(
+        "--only", choices=["renderers", "encodings", "chunks", "default_run"], help="one section"
+    )
     args = parser.parse_args()
     frames = 3 if args.quick else 10
     print(f"Machine: {machine()}\n")
@@ -212,6 +258,11 @@ def main() -> None:
         print(
             "### Bytes and encode time per stream (11 cameras 160-170, frames of the full warehouse, no agent)\n"
         )
+        print(md + "\n")
+    if args.only in (None, "chunks"):
+        with tempfile.TemporaryDirectory() as tmp:
+            md, sections["chunks"] = chunks(Path(tmp), 3)
+        print("### MCAP chunk compression and checksum (the chunks of a 12-camera recording, all streams)\n")
         print(md + "\n")
     if not args.quick and args.only in (None, "default_run"):
         with tempfile.TemporaryDirectory() as tmp:
