@@ -11,8 +11,9 @@ One run prints, as markdown, then the raw numbers as JSON:
 2. rtf        ``python -m simlan_data.run -m experiment=rtf`` (basic launcher): the real-time
               factor per camera count {1, 2, 4, 6, 9, 12} x stream set, beside SIMLAN's numbers.
 3. launchers  the same sweep through ``hydra/launcher=joblib`` (both cores): wall time of the
-              whole command against the basic launcher's; then the basic launcher once more
-              with its jobs as joblib runs them (no helper threads: ``LP_NUM_THREADS=0``,
+              whole command against the basic launcher's, each launcher run twice in the order
+              basic, joblib, joblib, basic (a steady drift of the host's speed cancels out);
+              then the basic launcher once more with its jobs as joblib runs them (no helper threads: ``LP_NUM_THREADS=0``,
               ``recording.encode_threads=0``), and the ceiling of the speedup that this run's
               CPU seconds allow on 2 cores (see :func:`launcher_ceiling`).
 4. gpss       the headline configuration with the GPSS loop on (robots steer on the camera
@@ -209,21 +210,25 @@ def sweep(
     return wall, collect_sweep(out)
 
 
-def launcher_ceiling(basic_s: float, basic: Any, parallel: Any, cores: int = 2) -> dict[str, float]:
-    """What the basic sweep's wall and the parallel sweep's CPU allow the parallel launcher.
+def launcher_ceiling(pairs: list[tuple[float, Any, float, Any]], cores: int = 2) -> dict[str, float]:
+    """What the basic sweeps' wall and the parallel sweeps' CPU allow the parallel launcher.
 
-    The basic sweep is its jobs' loops (wall: ``sim.wall_s`` summed; they may spread over more
-    than one core) plus the rest (start-up, evaluation, reports: the command's wall minus the
-    loops'). A parallel launcher can at best keep all ``cores`` busy with its own loops' CPU
-    (``sim.cpu_s`` summed) and the same rest: ``basic_s / ((loops CPU + rest) / cores)``."""
-    loops_wall = float(basic["sim.wall_s"].sum())
+    ``pairs``: (basic command's wall, its table, parallel command's wall, its table) per pair
+    of sweeps. A basic sweep is its jobs' loops (wall: ``sim.wall_s`` summed; they may spread
+    over more than one core) plus the rest (start-up, evaluation, reports: the command's wall
+    minus the loops'). A parallel launcher can at best keep all ``cores`` busy with its own
+    loops' CPU (``sim.cpu_s`` summed) and the same rest: ``basic_s / ((loops CPU + rest) /
+    cores)``, over the pairs' sums. Figures per sweep are means over the pairs."""
+    n = len(pairs)
+    basic_s = sum(p[0] for p in pairs)
+    loops_wall = sum(float(p[1]["sim.wall_s"].sum()) for p in pairs)
     rest = basic_s - loops_wall
-    parallel_cpu = float(parallel["sim.cpu_s"].sum())
+    parallel_cpu = sum(float(p[3]["sim.cpu_s"].sum()) for p in pairs)
     return {
-        "basic_loops_wall_s": loops_wall,
-        "basic_loops_cpu_s": float(basic["sim.cpu_s"].sum()),
-        "basic_rest_s": rest,
-        "parallel_loops_cpu_s": parallel_cpu,
+        "basic_loops_wall_s": loops_wall / n,
+        "basic_loops_cpu_s": sum(float(p[1]["sim.cpu_s"].sum()) for p in pairs) / n,
+        "basic_rest_s": rest / n,
+        "parallel_loops_cpu_s": parallel_cpu / n,
         "ceiling": basic_s / ((parallel_cpu + rest) / cores),
     }
 
@@ -387,7 +392,11 @@ def main() -> None:
         )
         print(rtf_markdown(rows), flush=True)
         if want("launchers"):
+            # basic, joblib, joblib, basic: each launcher twice, in an order that cancels a host
+            # that speeds up or slows down steadily during the run (it does: section 3)
             joblib_s, par = sweep(out / "sweep_joblib", "joblib", sweep_args)
+            joblib2_s, par2 = sweep(out / "sweep_joblib_2", "joblib", sweep_args)
+            basic2_s, basic2 = sweep(out / "sweep_basic_2", "basic", sweep_args)
             # the basic launcher with its jobs as joblib runs them (one thread each): what the
             # speedup would be against jobs that do not spread over the second core themselves
             serial_s, serial = sweep(
@@ -397,22 +406,28 @@ def main() -> None:
                 env_extra={"LP_NUM_THREADS": "0"},
             )
             jobs = basic.height
-            ceiling = launcher_ceiling(basic_s, basic, par)
+            pairs = [(basic_s, basic, joblib_s, par), (basic2_s, basic2, joblib2_s, par2)]
+            ceiling = launcher_ceiling(pairs)
+            basic_mean, joblib_mean = (basic_s + basic2_s) / 2, (joblib_s + joblib2_s) / 2
             raw["launchers"] = {
                 "jobs": jobs,
-                "basic_s": basic_s,
-                "joblib_s": joblib_s,
-                "speedup": basic_s / joblib_s,
+                "basic_s": basic_mean,
+                "joblib_s": joblib_mean,
+                "speedup": basic_mean / joblib_mean,
+                "order": ["basic", "joblib", "joblib", "basic", "basic (jobs single-threaded)"],
+                "basic_each_s": [basic_s, basic2_s],
+                "joblib_each_s": [joblib_s, joblib2_s],
+                "speedup_each": [basic_s / joblib_s, basic2_s / joblib2_s],
                 "basic_serial_s": serial_s,
-                "speedup_over_serial_jobs": serial_s / joblib_s,
+                "speedup_over_serial_jobs": serial_s / joblib_mean,
                 **ceiling,
                 "joblib_rtf": rtf_rows(par).to_dicts(),
                 "basic_serial_rtf": rtf_rows(serial).to_dicts(),
             }
             print("### The same sweep through the basic and the joblib launcher\n")
 
-            def loops(t: Any) -> str:
-                return f"{t['sim.wall_s'].sum():.0f} / {t['sim.cpu_s'].sum():.0f}"
+            def loops(*ts: Any) -> str:
+                return " + ".join(f"{t['sim.wall_s'].sum():.0f} / {t['sim.cpu_s'].sum():.0f}" for t in ts)
 
             print(
                 table(
@@ -425,31 +440,32 @@ def main() -> None:
                     ],
                     [
                         [
-                            "basic (one job at a time)",
+                            "basic (one job at a time), runs 1 and 4",
                             "Mesa 1 + encoders 2 (a single run's default)",
-                            f"{basic_s:.0f}",
-                            loops(basic),
-                            f"**{basic_s / joblib_s:.2f}**",
+                            f"{basic_s:.0f} + {basic2_s:.0f}",
+                            loops(basic, basic2),
+                            f"**{basic_mean / joblib_mean:.2f}** (each pair: "
+                            f"{basic_s / joblib_s:.2f}, {basic2_s / joblib2_s:.2f})",
                         ],
                         [
-                            "basic, jobs as joblib runs them",
+                            "joblib (n_jobs=-1: one job per core), runs 2 and 3",
+                            "none",
+                            f"{joblib_s:.0f} + {joblib2_s:.0f}",
+                            loops(par, par2),
+                            "1.00",
+                        ],
+                        [
+                            "basic, jobs as joblib runs them, run 5",
                             "none",
                             f"{serial_s:.0f}",
                             loops(serial),
-                            f"{serial_s / joblib_s:.2f}",
-                        ],
-                        [
-                            "joblib (n_jobs=-1: one job per core)",
-                            "none",
-                            f"{joblib_s:.0f}",
-                            loops(par),
-                            "1.00",
+                            f"{serial_s / joblib_mean:.2f}",
                         ],
                     ],
                 )
                 + f"\n\nCeiling of joblib's speedup over the basic launcher from this run's CPU seconds "
                 f"(basic_s / ((joblib loops' CPU + the basic sweep's rest) / 2)): {ceiling['ceiling']:.2f}x "
-                f"(rest {ceiling['basic_rest_s']:.0f} s).\n",
+                f"(rest {ceiling['basic_rest_s']:.0f} s per basic sweep).\n",
                 flush=True,
             )
     if want("gpss"):
