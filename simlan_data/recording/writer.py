@@ -383,7 +383,7 @@ def _close_chunk_with_crc(storage: McapWriter) -> None:
     write_uint64(rec, pending.message_start_time)
     write_uint64(rec, pending.message_end_time)
     write_uint64(rec, len(raw))
-    write_uint32(rec, isal_zlib.crc32(raw))  # zlib's CRC32, 5x faster (22 against 4 GB/s here)
+    write_uint32(rec, isal_zlib.crc32(raw))  # zlib's CRC32, 6x faster (spine.py --only chunks)
     compressed = storage.compressor(raw)
     write_string(rec, storage.compression)
     write_uint64(rec, len(compressed))
