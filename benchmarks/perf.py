@@ -13,9 +13,10 @@ One run prints, as markdown, then the raw numbers as JSON:
 3. launchers  the same sweep through ``hydra/launcher=joblib`` (both cores): wall time of the
               whole command against the basic launcher's, each launcher run twice in the order
               basic, joblib, joblib, basic (a steady drift of the host's speed cancels out);
-              then the basic launcher once more with its jobs as joblib runs them (no helper threads: ``LP_NUM_THREADS=0``,
-              ``recording.encode_threads=0``), and the ceiling of the speedup that this run's
-              CPU seconds allow on 2 cores (see :func:`launcher_ceiling`).
+              then the basic launcher once more with its jobs as joblib runs them (no helper
+              threads: ``LP_NUM_THREADS=0``, ``recording.encode_threads=0``), and the ceiling
+              of the speedup that this run's CPU seconds allow on 2 cores (see
+              :func:`launcher_ceiling`).
 4. gpss       the headline configuration with the GPSS loop on (robots steer on the camera
               estimate): 12 cameras, RGB + depth + semantic, 960x540 at 5 Hz, four robots,
               recording on; depth and labels recorded at 1 Hz and at 5 Hz; and, for the cost of
@@ -393,7 +394,8 @@ def main() -> None:
         print(rtf_markdown(rows), flush=True)
         if want("launchers"):
             # basic, joblib, joblib, basic: each launcher twice, in an order that cancels a host
-            # that speeds up or slows down steadily during the run (it does: section 3)
+            # that speeds up or slows down steadily during the run (it does: BENCHMARKS.md,
+            # "Real-time camera networks", section 3)
             joblib_s, par = sweep(out / "sweep_joblib", "joblib", sweep_args)
             joblib2_s, par2 = sweep(out / "sweep_joblib_2", "joblib", sweep_args)
             basic2_s, basic2 = sweep(out / "sweep_basic_2", "basic", sweep_args)
