@@ -37,7 +37,7 @@ from .recording.reader import RecordingReader
 from .run_marker import RunMarker, write_running
 from .sim.scene import load_inputs
 from .sim.simulation import RunStats, Simulation
-from .validation import check_finite, check_references, config_error_from, resolve_interpolations
+from .validation import check_finite, check_nulls, check_references, config_error_from, resolve_interpolations
 
 log = logging.getLogger("simlan_data.run")
 
@@ -47,6 +47,7 @@ register_configs()
 def to_config(cfg: DictConfig) -> Config:
     """Build the typed config; range and reference checks raise ConfigError."""
     check_finite(cfg)
+    check_nulls(cfg)
     resolved = resolve_interpolations(cfg)
     try:
         obj = OmegaConf.to_object(resolved)

@@ -21,7 +21,8 @@ import math
 import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import fields, is_dataclass
-from typing import Any
+from types import UnionType
+from typing import Any, Union, get_args, get_origin, get_type_hints
 
 from hydra.errors import MissingConfigException, OverrideParseException
 from omegaconf import DictConfig, ListConfig, OmegaConf
@@ -256,6 +257,35 @@ def check_finite(node: Any, prefix: str = "") -> None:
             "not a finite number",
             f"give a number{' in ' + unit if unit else ''}",
         )
+
+
+def check_nulls(node: Any, schema: type = Config, prefix: str = "") -> None:
+    """Refuse null where the schema has no place for it (``~key +key=null`` gets past OmegaConf's
+    own type check: the re-added key is untyped).
+
+    Raises:
+        ConfigError: naming the first such key.
+    """
+    if isinstance(node, (DictConfig, ListConfig)):
+        node = OmegaConf.to_container(node, resolve=False, throw_on_missing=False)
+    if not isinstance(node, dict):
+        return
+    hints = get_type_hints(schema)
+    for f in fields(schema):
+        if f.name not in node:
+            continue
+        key, value, hint = f"{prefix}{f.name}", node[f.name], hints[f.name]
+        members = get_args(hint) if get_origin(hint) in (Union, UnionType) else (hint,)
+        if value is None and type(None) not in members and Any not in members:
+            raise ConfigError(
+                f"invalid {key}=None",
+                "config",
+                "must not be null",
+                f"give {key} a value or drop the override",
+            )
+        for member in members:
+            if is_dataclass(member) and isinstance(member, type):
+                check_nulls(value, member, f"{key}.")
 
 
 # ------------------------------------------------------------------------------- references

@@ -86,6 +86,7 @@ CONFIG_CASES = [
         ("encode threads", ["recording.encode_threads=100"], r"invalid recording.encode_threads=100 in config: must be within 0..16"),
         ("control rate", ["control_rate_hz=7"], r"invalid control_rate_hz=7.0 in config: the simulation steps at world.physics_hz=240"),
         ("control rate zero (found by fuzzing)", ["control_rate_hz=0"], r"invalid control_rate_hz=0.0 in config: must be > 0"),
+        ("control rate null (found by fuzzing)", ["~control_rate_hz", "+control_rate_hz=null"], r"invalid control_rate_hz=None in config: must not be null; give control_rate_hz a value"),
         ("render backend", ["render.backend=vulkan"], r"invalid render.backend='vulkan' in config: expected one of auto, egl, tiny"),
         ("localization method", ["localization.method=magic"], r"invalid localization.method='magic' in config: expected one of ground, pnp"),
         ("localization source", ["localization.source=gps"], r"invalid localization.source='gps' in config: expected one of camera, ground_truth"),

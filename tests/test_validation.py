@@ -99,3 +99,11 @@ def test_replay_cli_refuses_bad_recordings_with_exit_2(tmp_path: Path) -> None:
     assert proc.returncode == 2 and "python -m simlan_data.recover" in proc.stderr
     proc = run_cli(str(tmp_path / "nothing"), "--info", module="simlan_data.replay")
     assert proc.returncode == 2 and "no such file or directory" in proc.stderr
+
+
+def test_check_nulls_names_the_nested_key() -> None:
+    from simlan_data.validation import check_nulls
+
+    with pytest.raises(ConfigError, match=r"invalid recording.jpeg_quality=None in config: must not be null"):
+        check_nulls({"recording": {"jpeg_quality": None, "enabled": True}, "duration_s": 5.0})
+    check_nulls({"recording": {"jpeg_quality": 85}, "duration_s": 5.0, "unknown": None})  # not ours to judge
