@@ -239,7 +239,7 @@ class RecordingConfig:
     semantic_rate_hz: float = 1.0
     ground_truth_rate_hz: float = 60.0
     compression: str = "zstd"
-    compression_level: int = -1
+    compression_level: int = 2
     flush_period_s: float = 1.0
     fsync: bool = False  # also force each flush to the disk: bounded loss on a power cut, not just a kill
     encode_threads: int = 2
@@ -256,7 +256,7 @@ class RecordingConfig:
                 "recording.compression_level",
                 self.compression_level,
                 "zstd levels are -7..22",
-                "use -1 (the default)",
+                "use 2 (the default)",
             )
         if not 1 <= self.jpeg_quality <= 100:
             raise _bad("recording.jpeg_quality", self.jpeg_quality, "must be within 1..100", "use 90")

@@ -87,7 +87,7 @@ class RecordingWriter:
         path: Path | str,
         *,
         compression: str = "zstd",
-        compression_level: int = -1,
+        compression_level: int = 2,
         flush_period_ns: int = NS_PER_S,
         encode_threads: int = 0,
         fsync: bool = False,
@@ -166,11 +166,10 @@ class RecordingWriter:
         storage = self._writer.storage
         assert isinstance(storage, McapWriter)
         if storage.compression == "zstd":
-            # rosbags compresses chunks at zstd's default level 3. Our chunks are mostly JPEG and
-            # PNG bytes (already deflated), which no level shrinks by more than 2 %: the fast
-            # level -1 keeps them as small as level 1 does, 2.3x faster than level 2 (12 cameras,
-            # all streams: ratio 0.984 / 0.982, 2300 / 1000 MB/s; telemetry alone: 0.186 against
-            # 0.182). benchmarks/spine.py --only chunks measures it.
+            # rosbags compresses chunks at zstd's default level 3. Level 2 is as small and about
+            # twice as fast on our chunks; it finds the repeated bytes of cameras whose image did
+            # not change (the default run: 0.83 of raw at 600 MB/s; levels 1 and -1 miss them:
+            # 0.95). benchmarks/spine.py --only chunks measures both kinds of recording.
             storage.compressor = functools.partial(zstd.compress, level=self.compression_level)
         # rosbags leaves the chunk CRC at 0 (none); ours lets readers detect a corrupt chunk
         storage.close_chunk = functools.partial(_close_chunk_with_crc, storage)  # type: ignore[method-assign]
