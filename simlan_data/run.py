@@ -46,8 +46,9 @@ register_configs()
 
 def to_config(cfg: DictConfig) -> Config:
     """Build the typed config; range and reference checks raise ConfigError."""
-    check_finite(cfg)
-    check_nulls(cfg)
+    plain = OmegaConf.to_container(cfg, resolve=False, throw_on_missing=False)  # one walk for both
+    check_finite(plain)
+    check_nulls(plain)
     resolved = resolve_interpolations(cfg)
     try:
         obj = OmegaConf.to_object(resolved)
