@@ -56,18 +56,16 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
 
 
-def encode_png(image: NDArray[np.uint8] | NDArray[np.uint16], *, level: int = PNG_LEVEL) -> bytes:
-    """A PNG of a grey (HxW, uint8 or uint16) or RGB (HxWx3, uint8) image; decodes to ``image``.
+def png_filtered(image: NDArray[np.uint8] | NDArray[np.uint16]) -> NDArray[np.uint8]:
+    """The rows a PNG compresses: each row big-endian, "up"-filtered, after its filter byte.
 
     Raises:
-        ValueError: another shape or dtype, or an empty image (PNG has no 0-pixel images).
+        ValueError: another shape or dtype than a PNG of :func:`encode_png` takes, or an empty image.
     """
     unsigned = image.dtype.kind == "u"  # either byte order: rows are written big-endian
-    if image.ndim == 2 and unsigned and image.itemsize in (1, 2):
-        colour_type = 0
-    elif image.ndim == 3 and image.shape[2] == 3 and unsigned and image.itemsize == 1:
-        colour_type = 2
-    else:
+    grey = image.ndim == 2 and unsigned and image.itemsize in (1, 2)
+    rgb = image.ndim == 3 and image.shape[2] == 3 and unsigned and image.itemsize == 1
+    if not (grey or rgb):
         raise ValueError(
             f"no PNG for a {image.dtype} image of shape {image.shape}: HxW grey or HxWx3 uint8 RGB"
         )
@@ -80,15 +78,26 @@ def encode_png(image: NDArray[np.uint8] | NDArray[np.uint16], *, level: int = PN
     filtered[:, 0] = PNG_FILTER_UP  # each byte minus the one above it (the first row: minus 0)
     filtered[0, 1:] = rows[0]
     np.subtract(rows[1:], rows[:-1], out=filtered[1:, 1:])
+    return filtered
+
+
+def png_file(image: np.ndarray, idat: bytes) -> bytes:
+    """The PNG file of ``image`` (checked by :func:`png_filtered`) around its zlib stream ``idat``."""
+    height, width = image.shape[:2]
+    colour_type = 2 if image.ndim == 3 else 0
     header = struct.pack(">IIBBBBB", width, height, 8 * image.itemsize, colour_type, 0, 0, 0)
     return b"".join(
-        (
-            PNG_SIGNATURE,
-            _png_chunk(b"IHDR", header),
-            _png_chunk(b"IDAT", isal_zlib.compress(filtered, level)),
-            _png_chunk(b"IEND", b""),
-        )
+        (PNG_SIGNATURE, _png_chunk(b"IHDR", header), _png_chunk(b"IDAT", idat), _png_chunk(b"IEND", b""))
     )
+
+
+def encode_png(image: NDArray[np.uint8] | NDArray[np.uint16], *, level: int = PNG_LEVEL) -> bytes:
+    """A PNG of a grey (HxW, uint8 or uint16) or RGB (HxWx3, uint8) image; decodes to ``image``.
+
+    Raises:
+        ValueError: another shape or dtype, or an empty image (PNG has no 0-pixel images).
+    """
+    return png_file(image, isal_zlib.compress(png_filtered(image), level))
 
 
 MAX_DECODED_PIXELS = 8192 * 8192  # refuse decoding absurd images from untrusted recordings

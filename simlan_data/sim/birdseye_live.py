@@ -23,7 +23,7 @@ from ..geometry.camera import CameraModel
 from ..gpss.birdseye import BirdseyeStitcher
 from ..recording import messages as M
 from ..recording import schema
-from ..recording.codecs import encode_rgb
+from ..recording.incremental import RgbStream
 from ..recording.writer import RecordingWriter
 from .camera_recording import _Restamped
 from .rendering import CameraImages
@@ -48,7 +48,8 @@ class BirdseyeRecorder:
 
     def __init__(self, writer: RecordingWriter, cfg: Config, cameras: Sequence[CameraModel]) -> None:
         bcfg = cfg.birdseye
-        self.writer, self.jpeg_quality = writer, bcfg.jpeg_quality
+        self.writer = writer
+        self._encode = RgbStream("jpeg", jpeg_quality=bcfg.jpeg_quality)  # only changed rows again
         self.every = round(cfg.cameras.rate_hz / bcfg.rate_hz)
         self.stitcher = BirdseyeStitcher(
             cameras_as_recorded(cameras), bcfg.canvas(), feather_m=bcfg.feather_m
@@ -76,11 +77,7 @@ class BirdseyeRecorder:
         canvas = self.stitcher.stitch([im.rgb for im in images])  # type: ignore[misc]
         self.stitch_wall_s += time.perf_counter() - t0
         self.canvases += 1
-        quality = self.jpeg_quality
+        encode = self._encode
         self._last = self.writer.submit(
-            self.topic,
-            stamp_ns,
-            lambda: M.compressed_image(
-                stamp_ns, schema.MAP_FRAME, *encode_rgb(canvas, "jpeg", jpeg_quality=quality)
-            ),
+            self.topic, stamp_ns, lambda: M.compressed_image(stamp_ns, schema.MAP_FRAME, *encode(canvas))
         )

@@ -3,6 +3,8 @@
 Most cameras see no motion most of the time: their images are identical frame after frame. The
 first time an image version is recorded it is encoded and serialized on a worker thread; while it
 stays unchanged, later frames reuse those CDR bytes with a new header stamp (as do camera infos).
+A changed image differs from the last one mostly in a few rows: each camera's colour and depth
+streams have their own encoder (``recording/incremental.py``) that encodes only those again.
 
 With ``decode_gray`` the worker that JPEG-encodes a colour image also decodes it to grey, which
 is what the localizer searches (it sees what the bag holds): the simulation thread only waits
@@ -24,7 +26,8 @@ from ..config import RecordingConfig
 from ..geometry.camera import CameraModel
 from ..recording import messages as M
 from ..recording import schema
-from ..recording.codecs import encode_depth, encode_labels, encode_rgb
+from ..recording.codecs import encode_labels
+from ..recording.incremental import DepthStream, RgbStream
 from ..recording.writer import RecordingWriter
 from .rendering import CameraImages
 
@@ -78,6 +81,7 @@ class CameraRecorder:
         self._info: dict[str, bytes] = {}
         self._version: dict[str, int] = {}
         self._cache: dict[tuple[str, str], tuple[int, Any, Any]] = {}
+        self._encoders: dict[tuple[str, str], Callable[[Any], tuple[Any, ...]] | None] = {}
         self.encoded = 0
 
     def topics(self, camera_id: str) -> dict[str, schema.Topic]:
@@ -92,14 +96,16 @@ class CameraRecorder:
         return self._topics[camera_id]
 
     def _encoder(self, stream: str) -> Callable[[Any], tuple[Any, ...]] | None:
+        """A new encoder for one camera's ``stream`` (None: recorded raw)."""
         rec = self.rec
         if stream == "rgb":
             if rec.rgb_encoding == "raw":
                 return None
             decode = self.decode_gray
+            encode = RgbStream(rec.rgb_encoding, jpeg_quality=rec.jpeg_quality)
 
             def rgb(a: Any) -> EncodedRgb:
-                fmt, data = encode_rgb(a, rec.rgb_encoding, jpeg_quality=rec.jpeg_quality)
+                fmt, data = encode(a)
                 gray = None
                 if decode:
                     gray = np.asarray(
@@ -110,7 +116,7 @@ class CameraRecorder:
 
             return rgb
         if stream == "depth":
-            return None if rec.depth_encoding == "raw" else encode_depth
+            return None if rec.depth_encoding == "raw" else DepthStream()
         return None if rec.semantic_encoding == "raw" else encode_labels
 
     def record(self, t: int, frame_index: int, camera: CameraModel, images: CameraImages) -> Any:
@@ -136,7 +142,9 @@ class CameraRecorder:
                 self.writer.write_pending(topic, t, _Restamped(pending, t))
             else:
                 assert array is not None  # (the streams recorded are the streams rendered)
-                encode = self._encoder(stream)
+                if key not in self._encoders:
+                    self._encoders[key] = self._encoder(stream)
+                encode = self._encoders[key]
                 if encode is None:
                     encoded = None
                     pending = self.writer.submit(topic, t, functools.partial(M.raw_image, t, frame, array))

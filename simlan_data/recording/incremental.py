@@ -1,0 +1,245 @@
+"""Stream encoders that redo only the rows of an image that changed since their last image.
+
+A camera's changed frame differs from its last one only where an agent moved: about a fifth of
+the rows (median 0.18 of the height over the 12-camera warehouse run). The whole-image encoders
+(``codecs.encode_png``) compress every row again; these keep, per stream, the compressed form of
+each band of rows and compress only the bands whose rows changed.
+
+JPEG: every restart interval of the colour images (``codecs.jpeg_restart_interval``: they never
+cross an MCU row of 16 pixels) is an entropy-coded segment that depends on its own pixels only
+(DC prediction restarts with it). A run of changed MCU rows is encoded as an image of its own
+with the same settings, and its segments replace those rows' segments (the restart markers
+renumbered): byte for byte the JPEG that encoding the whole image gives (checked once per
+process on a test image; if this OpenCV's encoder does not split so, every frame is encoded
+whole).
+
+PNG: the IDAT's deflate stream is the concatenation of one independently compressed segment per
+band of ``BAND_ROWS`` filtered rows (each ended by a full flush: byte-aligned, no match reaching
+back into an earlier band; the last one final), wrapped in the zlib header and the Adler-32 of
+all filtered rows, as pigz builds its streams. Any PNG decoder reads it; it is 0.3 % larger than
+one segment. Semantic labels are left to ``codecs.encode_labels``: they compress in 0.2 ms
+whole, no faster banded.
+
+The output depends on the image only, never on the images encoded before it: an unchanged band
+reuses the bytes that compressing the same filtered rows gives. A recording is thus the same
+whatever the order or thread its frames were encoded on.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+import threading
+
+import cv2
+import numpy as np
+from isal import isal_zlib
+from numpy.typing import NDArray
+
+from .codecs import (
+    DEPTH_FORMAT,
+    DEPTH_HEADER,
+    JPEG_FORMAT,
+    JPEG_MCU_PX,
+    PNG_LEVEL,
+    PNG_RGB_FORMAT,
+    depth_to_mm,
+    encode_rgb,
+    jpeg_restart_interval,
+    png_file,
+    png_filtered,
+)
+
+# rows per independently compressed band: measured on the warehouse run's depth frames
+# (benchmarks/spine.py --only encodings), 32 rows cost 0.4 ms more than one segment when every
+# band changes and save most of the work when a fifth of the rows change; 16 rows pay the
+# per-band start-up twice as often
+BAND_ROWS = 32
+_ZLIB_HEADER = b"\x78\x01"  # deflate, 32 KiB window, no preset dictionary (FLEVEL: fastest)
+
+
+def changed_rows(new: np.ndarray, old: np.ndarray | None) -> NDArray[np.bool_]:
+    """Which rows of ``new`` differ from ``old`` (all, if ``old`` is None or another shape)."""
+    if old is None or old.shape != new.shape or old.dtype != new.dtype:
+        return np.ones(new.shape[0], dtype=bool)
+    a = np.ascontiguousarray(new).view(np.uint8).reshape(new.shape[0], -1)
+    b = np.ascontiguousarray(old).view(np.uint8).reshape(old.shape[0], -1)
+    if a.shape[1] % 8 == 0:  # compare 8 bytes at a time
+        a, b = a.view(np.uint64), b.view(np.uint64)
+    return np.asarray(np.not_equal(a, b).any(axis=1))
+
+
+def _keep(image: np.ndarray, buffer: np.ndarray | None) -> np.ndarray:
+    """A copy of ``image``, in ``buffer`` if it has the shape (no fresh pages to fault in)."""
+    if buffer is None or buffer.shape != image.shape or buffer.dtype != image.dtype:
+        return image.copy()
+    np.copyto(buffer, image)
+    return buffer
+
+
+class BandedPng:
+    """PNG encoder for one image stream: recompresses only the bands of rows that changed.
+
+    Thread-safe: a stream's frames may be encoded on different worker threads, one at a time.
+    """
+
+    def __init__(self, *, level: int = PNG_LEVEL, band_rows: int = BAND_ROWS) -> None:
+        if band_rows < 1:
+            raise ValueError(f"band_rows must be at least 1, got {band_rows}")
+        self.level, self.band_rows = level, band_rows
+        self._lock = threading.Lock()
+        self._image: np.ndarray | None = None
+        self._segments: list[bytes] = []
+        self.bands_compressed = 0
+        self.bands_reused = 0
+
+    def encode(self, image: NDArray[np.uint8] | NDArray[np.uint16]) -> bytes:
+        """The PNG of ``image`` (grey uint8/uint16 or RGB uint8), as ``codecs.encode_png`` takes."""
+        filtered = png_filtered(image)  # (validates the image)
+        height, rows = image.shape[0], self.band_rows
+        starts = range(0, height, rows)
+        with self._lock:
+            changed = changed_rows(image, self._image)
+            # a filtered row is the row minus the one above it: it changes with either
+            changed[1:] |= changed[:-1]
+            fresh = len(self._segments) != len(starts)
+            segments = []
+            for i, start in enumerate(starts):
+                if fresh or changed[start : start + rows].any():
+                    last = start + rows >= height
+                    c = isal_zlib.compressobj(self.level, isal_zlib.DEFLATED, -15)
+                    flush = isal_zlib.Z_FINISH if last else isal_zlib.Z_FULL_FLUSH
+                    segments.append(c.compress(filtered[start : start + rows]) + c.flush(flush))
+                    self.bands_compressed += 1
+                else:
+                    segments.append(self._segments[i])
+                    self.bands_reused += 1
+            self._segments = segments
+            self._image = _keep(image, self._image)
+        adler = isal_zlib.adler32(filtered).to_bytes(4, "big")
+        return png_file(image, b"".join((_ZLIB_HEADER, *segments, adler)))
+
+
+class DepthStream:
+    """``codecs.encode_depth`` for one camera's depth stream, banded (see :class:`BandedPng`)."""
+
+    def __init__(self) -> None:
+        self.png = BandedPng()
+
+    def __call__(self, depth_m: NDArray[np.float32]) -> tuple[str, bytes]:
+        return DEPTH_FORMAT, DEPTH_HEADER.pack(0, 0.0, 0.0) + self.png.encode(depth_to_mm(depth_m))
+
+
+_RST = re.compile(rb"\xff[\xd0-\xd7]")  # restart markers (0xFF in entropy data is stuffed: FF 00)
+_MARKERS = [bytes((0xFF, 0xD0 + i)) for i in range(8)]
+_EOI = b"\xff\xd9"
+
+
+def _jpeg_parts(data: bytes) -> tuple[bytes, list[bytes]]:
+    """A baseline JPEG's bytes up to the end of its scan header, and its entropy-coded segments."""
+    i = 2
+    while True:
+        if data[i] != 0xFF:
+            raise ValueError("not a JPEG marker")
+        marker, length = data[i + 1], int.from_bytes(data[i + 2 : i + 4], "big")
+        i += 2 + length
+        if marker == 0xDA:  # start of scan: the entropy-coded data follows its header
+            break
+    if not data.endswith(_EOI):
+        raise ValueError("JPEG without its end marker")
+    return data[:i], _RST.split(data[i:-2])
+
+
+class BandedJpeg:
+    """JPEG encoder for one colour stream: re-encodes only the MCU rows that changed.
+
+    Thread-safe like :class:`BandedPng`. ``encode`` returns what ``codecs.encode_rgb`` returns
+    for ``"jpeg"``, byte for byte.
+    """
+
+    def __init__(self, *, jpeg_quality: int) -> None:
+        self.quality = jpeg_quality
+        self._lock = threading.Lock()
+        self._image: np.ndarray | None = None
+        self._header = b""
+        self._rows: list[bytes] = []  # per MCU row: its segments, each with the marker after it
+        self.rows_encoded = 0
+        self.rows_reused = 0
+
+    def _encode(self, rgb: NDArray[np.uint8]) -> bytes:
+        return encode_rgb(rgb, "jpeg", jpeg_quality=self.quality)[1]
+
+    @staticmethod
+    def _row_bytes(segments: list[bytes], first: int, total: int) -> bytes:
+        """Segments ``first``.. of the image's ``total``, each followed by its restart marker
+        (numbered by its index in the image; none after the last)."""
+        parts: list[bytes] = []
+        for i, segment in enumerate(segments, start=first):
+            parts += (segment, _MARKERS[i % 8] if i < total - 1 else b"")
+        return b"".join(parts)
+
+    def encode(self, rgb: NDArray[np.uint8]) -> bytes:
+        height, width = rgb.shape[:2]
+        rows = -(-height // JPEG_MCU_PX)
+        per_row = -(-width // JPEG_MCU_PX) // jpeg_restart_interval(width)
+        with self._lock:
+            changed = changed_rows(rgb, self._image)
+            if not splices_exactly() or self._image is None or changed.all():
+                data = self._encode(rgb)
+                self._header, segments = _jpeg_parts(data)
+                self._rows = [
+                    self._row_bytes(segments[r * per_row : (r + 1) * per_row], r * per_row, len(segments))
+                    for r in range(rows)
+                ]
+                self._image = _keep(rgb, self._image)
+                self.rows_encoded += rows
+                return data
+            mcu = np.zeros(rows * JPEG_MCU_PX, dtype=bool)
+            mcu[:height] = changed
+            dirty = mcu.reshape(rows, JPEG_MCU_PX).any(axis=1)
+            # runs of changed MCU rows: [start, end)
+            edges = np.flatnonzero(np.diff(np.concatenate(([0], dirty.astype(np.int8), [0]))))
+            for start, end in zip(edges[::2].tolist(), edges[1::2].tolist()):
+                band = rgb[start * JPEG_MCU_PX : min(end * JPEG_MCU_PX, height)]
+                _, new = _jpeg_parts(self._encode(np.ascontiguousarray(band)))
+                if len(new) != (end - start) * per_row:  # pragma: no cover - guarded by splices_exactly
+                    raise RuntimeError(f"JPEG band of {end - start} MCU rows gave {len(new)} segments")
+                for r in range(start, end):
+                    first = (r - start) * per_row
+                    self._rows[r] = self._row_bytes(new[first : first + per_row], r * per_row, rows * per_row)
+            self.rows_encoded += int(dirty.sum())
+            self.rows_reused += rows - int(dirty.sum())
+            self._image = _keep(rgb, self._image)
+            return b"".join((self._header, *self._rows, _EOI))
+
+
+@functools.cache
+def splices_exactly() -> bool:
+    """Whether this OpenCV's JPEG encoder gives, for a band of MCU rows encoded alone, the same
+    restart segments as for those rows in the whole image (checked on a textured test image)."""
+    rng = np.random.default_rng(0)
+    image = np.asarray(
+        cv2.GaussianBlur(rng.integers(0, 256, (72, 200, 3), dtype=np.uint8), (5, 5), 1.5), np.uint8
+    )
+    whole = encode_rgb(image, "jpeg", jpeg_quality=85)[1]
+    _, segments = _jpeg_parts(whole)
+    per_row = -(-200 // JPEG_MCU_PX) // jpeg_restart_interval(200)
+    _, band = _jpeg_parts(encode_rgb(np.ascontiguousarray(image[16:48]), "jpeg", jpeg_quality=85)[1])
+    return band == segments[per_row : 3 * per_row]
+
+
+class RgbStream:
+    """``codecs.encode_rgb`` for one camera's colour stream (``"jpeg"`` or ``"png"``), banded."""
+
+    def __init__(self, encoding: str, *, jpeg_quality: int) -> None:
+        if encoding not in ("jpeg", "png"):
+            raise ValueError(f"not a compressed colour encoding: {encoding!r}")
+        self.encoding = encoding
+        self.jpeg = BandedJpeg(jpeg_quality=jpeg_quality) if encoding == "jpeg" else None
+        self.png = BandedPng() if encoding == "png" else None
+
+    def __call__(self, rgb: NDArray[np.uint8]) -> tuple[str, bytes]:
+        if self.jpeg is not None:
+            return JPEG_FORMAT, self.jpeg.encode(rgb)
+        assert self.png is not None
+        return PNG_RGB_FORMAT, self.png.encode(rgb)
