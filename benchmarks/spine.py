@@ -1,6 +1,6 @@
 """Benchmark of "the spine" (issue 2): renderer speed, encodings, the default run, recording cost.
 
-    python benchmarks/spine.py [--quick]
+    python benchmarks/spine.py [--quick] [--only SECTION]
 
 Prints markdown for BENCHMARKS.md. Every figure comes from this one run, baselines beside them.
 """
@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import best_of, machine, run_cli, table
 from simlan_data._pybullet import pb
 from simlan_data.geometry.calibration import load_calibration
-from simlan_data.recording.codecs import encode_depth, encode_labels, encode_rgb
+from simlan_data.recording.codecs import encode_depth, encode_labels, encode_png, encode_rgb
 from simlan_data.sim.agents import AGENT_TYPES, DiffDriveAgent
 from simlan_data.sim.dynamic_layer import MovedAgents
 from simlan_data.sim.pybullet_client import connect
@@ -197,6 +197,72 @@ def _chunks(run_dir: Path, overrides: list[str], repeats: int) -> tuple[str, dic
     return md + f"\n\nOver {len(raws)} chunks, {total / 2**20:.0f} MiB uncompressed.", raw
 
 
+def changed_frames(out_dir: Path, seconds: float) -> tuple[str, dict]:
+    """The stream encoders (only changed rows again) against encoding every changed frame whole,
+    on the changed frames of a real 12-camera recording, in recording order per camera."""
+    from simlan_data.recording.codecs import decode_compressed, depth_to_mm
+    from simlan_data.recording.incremental import BandedJpeg, BandedPng
+    from simlan_data.recording.reader import RecordingReader
+
+    run_dir = out_dir / "changed"
+    overrides = ["experiment=rtf", "cameras.count=12", "streams=rgbds_full", f"duration_s={seconds:g}"]
+    proc = run_cli(*overrides, f"hydra.run.dir={run_dir}")
+    if proc.returncode != 0:
+        raise SystemExit(proc.stderr)
+    streams: dict[str, dict[str, list[np.ndarray]]] = {"rgb": {}, "depth": {}}
+    for m in RecordingReader(run_dir / "recording").messages():
+        fmt = getattr(m.msg, "format", "")
+        stream = "rgb" if "jpeg" in fmt else "depth" if "compressedDepth" in fmt else None
+        if stream is None:
+            continue
+        image = decode_compressed(fmt, m.msg.data)
+        frames = streams[stream].setdefault(m.topic, [])
+        if stream == "depth":
+            image = depth_to_mm(image)
+        if not frames or not np.array_equal(frames[-1], image):  # (unchanged frames reuse bytes)
+            frames.append(image)
+    cases: dict[str, tuple[str, Any, Any]] = {
+        "rgb: jpeg q85, every changed frame whole (the baseline)": (
+            "rgb",
+            lambda: lambda im: encode_rgb(im, "jpeg", jpeg_quality=85)[1],
+            None,
+        ),
+        "rgb: jpeg q85, changed MCU rows only (default)": (
+            "rgb",
+            lambda: BandedJpeg(jpeg_quality=85).encode,
+            "rgb: jpeg q85, every changed frame whole (the baseline)",
+        ),
+        "depth: png, every changed frame whole (the baseline)": ("depth", lambda: encode_png, None),
+        "depth: png, changed bands of 32 rows only (default)": (
+            "depth",
+            lambda: BandedPng().encode,
+            "depth: png, every changed frame whole (the baseline)",
+        ),
+    }
+    rows, raw, outputs = [], {}, {}
+    for name, (stream, make, baseline) in cases.items():
+        topics = streams[stream]
+        n = sum(len(f) for f in topics.values())
+
+        def run(make: Any = make, topics: Any = topics) -> list[bytes]:
+            out = []
+            for frames in topics.values():
+                encode = make()  # a new encoder per camera, as the recorder has
+                out += [encode(im) for im in frames]
+            return out
+
+        outputs[name] = run()
+        seconds_all = best_of(run, 3)
+        size = sum(map(len, outputs[name]))
+        same = "-" if baseline is None else ("yes" if outputs[name] == outputs[baseline] else "no")
+        raw[name] = {"frames": n, "ms_per_frame": seconds_all / n * 1e3, "bytes": size, "same_bytes": same}
+        rows.append([name, str(n), f"{seconds_all / n * 1e3:.2f}", f"{size / n / 1024:.0f}", same])
+    md = table(
+        ["stream: encoder", "changed frames", "ms/frame", "KiB/frame", "bytes equal the baseline's"], rows
+    )
+    return md, raw
+
+
 def default_run(out_dir: Path, repeat: int) -> tuple[str, dict]:
     """The default scenario end to end, with recording and without (the baseline), interleaved,
     ``repeat`` times each; medians reported."""
@@ -252,7 +318,9 @@ def main() -> None:
     parser.add_argument("--json", type=Path, help="also write raw numbers here")
     parser.add_argument("--repeat", type=int, default=3, help="default-run repetitions (medians)")
     parser.add_argument(
-        "--only", choices=["renderers", "encodings", "chunks", "default_run"], help="one section"
+        "--only",
+        choices=["renderers", "encodings", "changed", "chunks", "default_run"],
+        help="one section",
     )
     args = parser.parse_args()
     frames = 3 if args.quick else 10
@@ -268,6 +336,13 @@ def main() -> None:
         md, sections["encodings"] = encodings(2 if args.quick else 5)
         print(
             "### Bytes and encode time per stream (11 cameras 160-170, frames of the full warehouse, no agent)\n"
+        )
+        print(md + "\n")
+    if args.only in (None, "changed"):
+        with tempfile.TemporaryDirectory() as tmp:
+            md, sections["changed"] = changed_frames(Path(tmp), 4.0 if args.quick else 20.0)
+        print(
+            "### Encoding changed frames (12 cameras, 4 robots, every frame recorded; per camera in order)\n"
         )
         print(md + "\n")
     if args.only in (None, "chunks"):
