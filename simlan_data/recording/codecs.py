@@ -128,9 +128,15 @@ def depth_to_mm(depth_m: NDArray[np.float32]) -> NDArray[np.uint16]:
     return np.asarray(scaled, dtype=np.uint16)
 
 
+def compressed_depth(png: bytes) -> tuple[str, bytes]:
+    """The (format, data) of compressed_depth_image_transport's 16UC1 PNG: its config header
+    (no inverse-depth parameters: the PNG holds millimetres), then the PNG of ``depth_to_mm``."""
+    return DEPTH_FORMAT, DEPTH_HEADER.pack(0, 0.0, 0.0) + png
+
+
 def encode_depth(depth_m: NDArray[np.float32], *, level: int = PNG_LEVEL) -> tuple[str, bytes]:
     """Encode metric depth as compressed_depth_image_transport's 16UC1 PNG."""
-    return DEPTH_FORMAT, DEPTH_HEADER.pack(0, 0.0, 0.0) + encode_png(depth_to_mm(depth_m), level=level)
+    return compressed_depth(encode_png(depth_to_mm(depth_m), level=level))
 
 
 def encode_labels(labels: NDArray[np.uint8], *, level: int = PNG_LEVEL) -> tuple[str, bytes]:

@@ -37,12 +37,11 @@ from isal import isal_zlib
 from numpy.typing import NDArray
 
 from .codecs import (
-    DEPTH_FORMAT,
-    DEPTH_HEADER,
     JPEG_FORMAT,
     JPEG_MCU_PX,
     PNG_LEVEL,
     PNG_RGB_FORMAT,
+    compressed_depth,
     depth_to_mm,
     encode_rgb,
     jpeg_restart_interval,
@@ -126,7 +125,7 @@ class DepthStream:
         self.png = BandedPng()
 
     def __call__(self, depth_m: NDArray[np.float32]) -> tuple[str, bytes]:
-        return DEPTH_FORMAT, DEPTH_HEADER.pack(0, 0.0, 0.0) + self.png.encode(depth_to_mm(depth_m))
+        return compressed_depth(self.png.encode(depth_to_mm(depth_m)))
 
 
 _RST = re.compile(rb"\xff[\xd0-\xd7]")  # restart markers (0xFF in entropy data is stuffed: FF 00)
