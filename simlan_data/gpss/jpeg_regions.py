@@ -26,8 +26,8 @@ from numpy.typing import NDArray
 
 _SOF_SEQUENTIAL = (0xC0, 0xC1)  # baseline and extended sequential Huffman: the ones we can splice
 _SOF_OTHER = frozenset({0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF})
-_RST = [bytes((0xFF, 0xD0 + i)) for i in range(8)]
-_EOI = b"\xff\xd9"
+RST_MARKERS = [bytes((0xFF, 0xD0 + i)) for i in range(8)]  # segment j is followed by RST_MARKERS[j % 8]
+EOI = b"\xff\xd9"
 
 
 @dataclass(frozen=True)
@@ -163,8 +163,8 @@ def sub_jpeg(seg: JpegSegments, bounds: tuple[int, int, int, int]) -> bytes:
     for j, (a, b) in enumerate(zip(starts, ends)):
         parts.append(data[a:b])
         if j != last:
-            parts.append(_RST[j & 7])
-    parts.append(_EOI)
+            parts.append(RST_MARKERS[j & 7])
+    parts.append(EOI)
     return b"".join(parts)
 
 

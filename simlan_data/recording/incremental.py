@@ -9,9 +9,9 @@ JPEG: every restart interval of the colour images (``codecs.jpeg_restart_interva
 cross an MCU row of 16 pixels) is an entropy-coded segment that depends on its own pixels only
 (DC prediction restarts with it). A run of changed MCU rows is encoded as an image of its own
 with the same settings, and its segments replace those rows' segments (the restart markers
-renumbered): byte for byte the JPEG that encoding the whole image gives (checked once per
-process on a test image; if this OpenCV's encoder does not split so, every frame is encoded
-whole).
+renumbered; ``gpss.jpeg_regions`` finds the segments): byte for byte the JPEG that encoding the
+whole image gives (checked once per process on a test image; if this OpenCV's encoder does not
+split so, every frame is encoded whole).
 
 PNG: the IDAT's deflate stream is the concatenation of one independently compressed segment per
 band of ``BAND_ROWS`` filtered rows (each ended by a full flush: byte-aligned, no match reaching
@@ -28,7 +28,6 @@ whatever the order or thread its frames were encoded on.
 from __future__ import annotations
 
 import functools
-import re
 import threading
 
 import cv2
@@ -36,15 +35,14 @@ import numpy as np
 from isal import isal_zlib
 from numpy.typing import NDArray
 
+from ..gpss.jpeg_regions import EOI, RST_MARKERS, JpegSegments, segments
 from .codecs import (
     JPEG_FORMAT,
-    JPEG_MCU_PX,
     PNG_LEVEL,
     PNG_RGB_FORMAT,
     compressed_depth,
     depth_to_mm,
     encode_rgb,
-    jpeg_restart_interval,
     png_file,
     png_filtered,
 )
@@ -128,24 +126,12 @@ class DepthStream:
         return compressed_depth(self.png.encode(depth_to_mm(depth_m)))
 
 
-_RST = re.compile(rb"\xff[\xd0-\xd7]")  # restart markers (0xFF in entropy data is stuffed: FF 00)
-_MARKERS = [bytes((0xFF, 0xD0 + i)) for i in range(8)]
-_EOI = b"\xff\xd9"
-
-
-def _jpeg_parts(data: bytes) -> tuple[bytes, list[bytes]]:
-    """A baseline JPEG's bytes up to the end of its scan header, and its entropy-coded segments."""
-    i = 2
-    while True:
-        if data[i] != 0xFF:
-            raise ValueError("not a JPEG marker")
-        marker, length = data[i + 1], int.from_bytes(data[i + 2 : i + 4], "big")
-        i += 2 + length
-        if marker == 0xDA:  # start of scan: the entropy-coded data follows its header
-            break
-    if not data.endswith(_EOI):
-        raise ValueError("JPEG without its end marker")
-    return data[:i], _RST.split(data[i:-2])
+def _split(data: bytes) -> tuple[JpegSegments, list[bytes]]:
+    """A JPEG of ``encode_rgb``'s parsed at its restart markers, and its entropy-coded segments."""
+    seg = segments(data)
+    if seg is None:  # pragma: no cover - encode_rgb always writes an interval dividing an MCU row
+        raise ValueError("a JPEG without usable restart markers")
+    return seg, [data[a:b] for a, b in zip(seg.starts.tolist(), seg.ends.tolist())]
 
 
 class BandedJpeg:
@@ -160,6 +146,7 @@ class BandedJpeg:
         self._lock = threading.Lock()
         self._image: np.ndarray | None = None
         self._header = b""
+        self._mcu_px = self._per_row = 0  # MCU height (pixels) and segments per MCU row
         self._rows: list[bytes] = []  # per MCU row: its segments, each with the marker after it
         self.rows_encoded = 0
         self.rows_reused = 0
@@ -173,33 +160,34 @@ class BandedJpeg:
         (numbered by its index in the image; none after the last)."""
         parts: list[bytes] = []
         for i, segment in enumerate(segments, start=first):
-            parts += (segment, _MARKERS[i % 8] if i < total - 1 else b"")
+            parts += (segment, RST_MARKERS[i % 8] if i < total - 1 else b"")
         return b"".join(parts)
 
     def encode(self, rgb: NDArray[np.uint8]) -> bytes:
-        height, width = rgb.shape[:2]
-        rows = -(-height // JPEG_MCU_PX)
-        per_row = -(-width // JPEG_MCU_PX) // jpeg_restart_interval(width)
+        height = rgb.shape[0]
         with self._lock:
-            changed = changed_rows(rgb, self._image)
-            if not splices_exactly() or self._image is None or changed.all():
+            changed = changed_rows(rgb, self._image)  # all rows for a first image or a new size
+            if not splices_exactly() or changed.all():
                 data = self._encode(rgb)
-                self._header, segments = _jpeg_parts(data)
+                seg, segs = _split(data)
+                self._header = data[: int(seg.starts[0])]
+                self._mcu_px, self._per_row = seg.mcu_h, seg.per_row
                 self._rows = [
-                    self._row_bytes(segments[r * per_row : (r + 1) * per_row], r * per_row, len(segments))
-                    for r in range(rows)
+                    self._row_bytes(segs[i : i + seg.per_row], i, len(segs))
+                    for i in range(0, len(segs), seg.per_row)
                 ]
                 self._image = _keep(rgb, self._image)
-                self.rows_encoded += rows
+                self.rows_encoded += len(self._rows)
                 return data
-            mcu = np.zeros(rows * JPEG_MCU_PX, dtype=bool)
+            mcu_px, per_row, rows = self._mcu_px, self._per_row, len(self._rows)
+            mcu = np.zeros(rows * mcu_px, dtype=bool)
             mcu[:height] = changed
-            dirty = mcu.reshape(rows, JPEG_MCU_PX).any(axis=1)
+            dirty = mcu.reshape(rows, mcu_px).any(axis=1)
             # runs of changed MCU rows: [start, end)
             edges = np.flatnonzero(np.diff(np.concatenate(([0], dirty.astype(np.int8), [0]))))
             for start, end in zip(edges[::2].tolist(), edges[1::2].tolist()):
-                band = rgb[start * JPEG_MCU_PX : min(end * JPEG_MCU_PX, height)]
-                _, new = _jpeg_parts(self._encode(np.ascontiguousarray(band)))
+                band = rgb[start * mcu_px : min(end * mcu_px, height)]
+                _, new = _split(self._encode(np.ascontiguousarray(band)))
                 if len(new) != (end - start) * per_row:  # pragma: no cover - guarded by splices_exactly
                     raise RuntimeError(f"JPEG band of {end - start} MCU rows gave {len(new)} segments")
                 for r in range(start, end):
@@ -208,7 +196,7 @@ class BandedJpeg:
             self.rows_encoded += int(dirty.sum())
             self.rows_reused += rows - int(dirty.sum())
             self._image = _keep(rgb, self._image)
-            return b"".join((self._header, *self._rows, _EOI))
+            return b"".join((self._header, *self._rows, EOI))
 
 
 @functools.cache
@@ -219,11 +207,11 @@ def splices_exactly() -> bool:
     image = np.asarray(
         cv2.GaussianBlur(rng.integers(0, 256, (72, 200, 3), dtype=np.uint8), (5, 5), 1.5), np.uint8
     )
-    whole = encode_rgb(image, "jpeg", jpeg_quality=85)[1]
-    _, segments = _jpeg_parts(whole)
-    per_row = -(-200 // JPEG_MCU_PX) // jpeg_restart_interval(200)
-    _, band = _jpeg_parts(encode_rgb(np.ascontiguousarray(image[16:48]), "jpeg", jpeg_quality=85)[1])
-    return band == segments[per_row : 3 * per_row]
+    seg, whole = _split(encode_rgb(image, "jpeg", jpeg_quality=85)[1])
+    mcu_px, per_row = seg.mcu_h, seg.per_row
+    band = np.ascontiguousarray(image[mcu_px : 3 * mcu_px])
+    _, band_segments = _split(encode_rgb(band, "jpeg", jpeg_quality=85)[1])
+    return band_segments == whole[per_row : 3 * per_row]
 
 
 class RgbStream:
