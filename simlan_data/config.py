@@ -41,8 +41,7 @@ def _incomplete(obj: Any) -> bool:
     )
 
 
-def _bad(field_name: str, value: Any, why: str, fix: str) -> ConfigError:
-    return ConfigError(f"invalid {field_name}={value!r}", "config", why, fix)
+_bad = ConfigError.invalid  # invalid KEY=VALUE in config: WHY; FIX
 
 
 def _positive(field_name: str, value: float, fix: str) -> None:

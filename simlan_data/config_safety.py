@@ -15,9 +15,7 @@ from .errors import ConfigError
 from .gpss.safety import SafetyParams
 from .scenarios import collision as collision_scenario
 
-
-def _bad(field_name: str, value: Any, why: str, fix: str) -> ConfigError:
-    return ConfigError(f"invalid {field_name}={value!r}", "config", why, fix)
+_bad = ConfigError.invalid  # invalid KEY=VALUE in config: WHY; FIX
 
 
 @dataclass

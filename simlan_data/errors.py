@@ -36,6 +36,11 @@ class ConfigError(SimlanError):
 
     exit_code = EXIT_BAD_INPUT
 
+    @classmethod
+    def invalid(cls, key: str, value: object, why: str, fix: str, where: str = "config") -> ConfigError:
+        """``invalid KEY=VALUE in WHERE: WHY; FIX``: a config value that fails its check."""
+        return cls(f"invalid {key}={value!r}", where, why, fix)
+
 
 class CalibrationError(ConfigError):
     """A camera calibration file is missing, unreadable or inconsistent."""

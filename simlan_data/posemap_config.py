@@ -21,7 +21,7 @@ REFINES = ("none", "fit")
 
 
 def _bad(key: str, value: Any, why: str, fix: str) -> ConfigError:
-    return ConfigError(f"invalid posemap.{key}={value!r}", "config", why, fix)
+    return ConfigError.invalid(f"posemap.{key}", value, why, fix)
 
 
 @dataclass

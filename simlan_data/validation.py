@@ -34,7 +34,7 @@ from omegaconf.errors import (
     ValidationError,
 )
 
-from .config import Config, _bad
+from .config import Config
 from .constants import CONF_DIR
 from .errors import ConfigError
 
@@ -277,7 +277,9 @@ def check_nulls(node: Any, schema: type = Config, prefix: str = "") -> None:
         key, value, hint = f"{prefix}{f.name}", node[f.name], hints[f.name]
         members = get_args(hint) if get_origin(hint) in (Union, UnionType) else (hint,)
         if value is None and type(None) not in members and Any not in members:
-            raise _bad(key, None, "must not be null", f"give {key} a value or drop the override")
+            raise ConfigError.invalid(
+                key, None, "must not be null", f"give {key} a value or drop the override"
+            )
         for member in members:
             if is_dataclass(member) and isinstance(member, type):
                 check_nulls(value, member, f"{key}.")

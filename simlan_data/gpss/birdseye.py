@@ -117,7 +117,7 @@ class CanvasSpec:
             )
 
     def _bad(self, name: str, value: object, why: str, fix: str) -> None:
-        raise ConfigError(f"invalid {self.prefix}.{name}={value!r}", self.where, why, fix)
+        raise ConfigError.invalid(f"{self.prefix}.{name}", value, why, fix, where=self.where)
 
     @property
     def width(self) -> int:
