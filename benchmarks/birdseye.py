@@ -25,8 +25,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # this checkout's simlan_data
 from common import best_of, machine, run_cli, table
-from simlan_data._pybullet import pb
-from simlan_data.config import WorldConfig
+from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec
+from simlan_data.algorithms.birdseye_simlan import SimlanBirdseye
+from simlan_data.config.schema import WorldConfig
 from simlan_data.evaluation.birdseye_metrics import (
     FULL,
     QualityEvaluator,
@@ -35,12 +36,11 @@ from simlan_data.evaluation.birdseye_metrics import (
     stitcher_projections,
 )
 from simlan_data.geometry.calibration import load_calibration
-from simlan_data.gpss.birdseye import BirdseyeStitcher, CanvasSpec
-from simlan_data.gpss.birdseye_simlan import SimlanBirdseye
 from simlan_data.recording.codecs import encode_rgb
 from simlan_data.sim.agents import AGENT_TYPES, DiffDriveAgent
 from simlan_data.sim.orthographic import render_orthographic, static_world
 from simlan_data.sim.rendering import CameraRenderer
+from simlan_data.world._pybullet import pb
 from simlan_data.world.layout import load_layout
 
 CAMERAS = list(range(160, 171))

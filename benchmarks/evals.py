@@ -8,7 +8,7 @@
    simulation stage, the replay stage and the whole command. Both must give the same verdicts
    and the same metrics (a run is a pure function of config and seed).
 2. The golden suite (replays only): wall time with 1 and 2 workers.
-3. ``python -m simlan_data.inspect --save``: wall time and .rrd size for a golden recording and for
+3. ``python -m simlan_data.view --save``: wall time and .rrd size for a golden recording and for
    the first recording of the suite, beside the recording's own size.
 
 Prints markdown for BENCHMARKS.md and the raw numbers as JSON. The cores are shared: the load
@@ -56,7 +56,7 @@ def inspect(recording: Path, rrd: Path) -> dict[str, float]:
     env.pop("HYDRA_FULL_ERROR", None)
     t0 = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-m", "simlan_data.inspect", str(recording), "--save", str(rrd)],
+        [sys.executable, "-m", "simlan_data.view", str(recording), "--save", str(rrd)],
         capture_output=True,
         text=True,
         cwd=REPO,
@@ -160,7 +160,7 @@ def main() -> int:
         print(f"\nSame metrics (non-timing) in both modes: {same}")
     print("\nGolden suite (replays only):\n")
     print(table(["workers", "whole command s", "exit code"], golden_rows))
-    print("\nInspect (`python -m simlan_data.inspect REC --save FILE.rrd`):\n")
+    print("\nInspect (`python -m simlan_data.view REC --save FILE.rrd`):\n")
     print(
         table(
             ["recording", "what", "recording MiB", ".rrd MiB", "wall s"],

@@ -44,7 +44,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine, run_cli, table
-from simlan_data._pybullet import pb
 from simlan_data.evaluation.rtf_report import markdown as rtf_markdown
 from simlan_data.evaluation.rtf_report import rtf_rows
 from simlan_data.evaluation.sweep import collect_sweep
@@ -53,6 +52,7 @@ from simlan_data.sim.agents import AGENT_TYPES, spawn_agent
 from simlan_data.sim.dynamic_layer import MovedAgents, StaticMeshes
 from simlan_data.sim.pybullet_client import connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import build_world
 from simlan_data.world.layout import load_layout
 

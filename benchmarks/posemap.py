@@ -31,12 +31,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(1, str(Path(__file__).resolve().parents[1]))  # this checkout's simlan_data
 from common import REPO, machine, run_cli, table
-from simlan_data.gpss.posemap.ambiguity import ambiguity_floor, curve_medians, curve_tangents
-from simlan_data.gpss.posemap.dataset import PoseDataset, read_dataset, split_of
-from simlan_data.gpss.posemap.fit import Refiner, posterior_cov
-from simlan_data.gpss.posemap.metrics import evaluate
-from simlan_data.gpss.posemap.skeleton import JOINT_NAMES, sampling_box
-from simlan_data.gpss.posemap.training import TrainedMapper, rig_of
+from simlan_data.algorithms.posemap.ambiguity import ambiguity_floor, curve_medians, curve_tangents
+from simlan_data.algorithms.posemap.dataset import PoseDataset, read_dataset, split_of
+from simlan_data.algorithms.posemap.fit import Refiner, posterior_cov
+from simlan_data.algorithms.posemap.metrics import evaluate
+from simlan_data.algorithms.posemap.training import TrainedMapper, rig_of
+from simlan_data.world.skeleton import JOINT_NAMES, sampling_box
 
 SIMLAN = {"autogluon": 0.2465, "mlp": 0.359}
 FUSION = [

@@ -24,8 +24,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from posemap import MODELS, dataset, dump_raw, information_bound, load_avg, train
 
 from common import REPO, machine, table
-from simlan_data.gpss.posemap.ambiguity import ambiguity_floor
-from simlan_data.posemap_config import PosemapConfig
+from simlan_data.algorithms.posemap.ambiguity import ambiguity_floor
+from simlan_data.algorithms.posemap.config import PosemapConfig
 
 # the projection estimator's default noise (the scales multiply it), from the config itself
 DEFAULT_SEEN_PX, DEFAULT_HIDDEN_PX = PosemapConfig.noise_px, PosemapConfig.hidden_noise_px

@@ -21,13 +21,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import best_of, machine, run_cli, table
-from simlan_data._pybullet import pb
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.recording.codecs import encode_depth, encode_labels, encode_png, encode_rgb
 from simlan_data.sim.agents import AGENT_TYPES, DiffDriveAgent
 from simlan_data.sim.dynamic_layer import MovedAgents
 from simlan_data.sim.pybullet_client import connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import build_world
 from simlan_data.world.layout import load_layout
 

@@ -1,5 +1,5 @@
 """``python -m simlan_data`` runs the default scenario (same as ``python -m simlan_data.run``)."""
 
-from simlan_data.run import main
+from simlan_data.apps.run import main
 
 main()

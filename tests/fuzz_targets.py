@@ -15,13 +15,13 @@ import numpy as np
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 
+from simlan_data.config.validation import _typed_keys, compose_config
 from simlan_data.constants import CALIBRATION_DIR
 from simlan_data.errors import SimlanError
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.recording import schema
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.recording.recover import recover
-from simlan_data.validation import _typed_keys, compose_config
 
 
 def clear(err: SimlanError) -> str:

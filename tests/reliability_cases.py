@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from simlan_data.agent_types import AGENT_TYPES, AgentType
+from simlan_data.config.validation import compose_config
 from simlan_data.constants import CALIBRATION_DIR, LAYOUT_DIR, NS_PER_S, URDF_DIR
 from simlan_data.errors import SimlanError
 from simlan_data.geometry.calibration import load_calibration
@@ -26,7 +26,7 @@ from simlan_data.recording.reader import RecordingReader
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.sim.scene import load_cameras, load_inputs
 from simlan_data.sim.urdf_check import check_urdf
-from simlan_data.validation import compose_config
+from simlan_data.world.agent_types import AGENT_TYPES, AgentType
 from simlan_data.world.layout import load_layout
 
 

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simlan_data._pybullet import pb
 from simlan_data.sim.agents import AGENT_TYPES, DiffDriveAgent, urdf_with_marker
 from simlan_data.sim.markers import marker_cells
 from simlan_data.sim.pybullet_client import connect
+from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import build_world
 from simlan_data.world.layout import load_layout
 

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from conftest import compose_config, run_cli
-from simlan_data.config import BirdseyeConfig
+from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec, camera_footprint, project_points
+from simlan_data.algorithms.birdseye_simlan import SimlanBirdseye
+from simlan_data.config.schema import BirdseyeConfig
+from simlan_data.config.validation import to_config
 from simlan_data.errors import ConfigError
 from simlan_data.geometry.calibration import load_calibration
-from simlan_data.gpss.birdseye import BirdseyeStitcher, CanvasSpec, camera_footprint, project_points
-from simlan_data.gpss.birdseye_simlan import SimlanBirdseye
-from simlan_data.run import to_config
 from simlan_data.sim.pybullet_client import Client
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
 

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from conftest import run_cli
-from simlan_data.config import WorldConfig
+from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec
+from simlan_data.config.schema import WorldConfig
 from simlan_data.errors import ConfigError, RecordingInputError
 from simlan_data.evaluation.birdseye_metrics import GCP_HALF_PX, ground_control_points, locate_gcps
 from simlan_data.evaluation.birdseye_replay import birdseye, birdseye_settings
 from simlan_data.evaluation.replay import ReplayContext
-from simlan_data.gpss.birdseye import BirdseyeStitcher, CanvasSpec
 from simlan_data.recording import schema
 from simlan_data.recording.codecs import decode_compressed, encode_rgb
 from simlan_data.recording.reader import RecordingReader

@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 
 from conftest import compose_config, run_cli
-from simlan_data.config import AgentConfig
+from simlan_data.config.schema import AgentConfig
+from simlan_data.config.validation import to_config
 from simlan_data.constants import CALIBRATION_DIR
 from simlan_data.errors import ConfigError
-from simlan_data.run import to_config
 from simlan_data.sim.scene import load_inputs
 
 

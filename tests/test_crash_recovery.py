@@ -34,9 +34,9 @@ from simlan_data.recording import schema
 from simlan_data.recording.codecs import encode_rgb
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.recording.recover import recover
+from simlan_data.recording.run_marker import RunMarker, write_running
 from simlan_data.recording.salvage import scan
 from simlan_data.recording.writer import RecordingWriter
-from simlan_data.run_marker import RunMarker, write_running
 
 CLOCK = next(t for t in schema.GLOBAL_TOPICS if t.name == schema.CLOCK)
 CAM = schema.camera_topics("1", rgb="png", depth=None, semantic=None)
@@ -266,7 +266,7 @@ def test_recover_refuses_what_it_cannot_or_must_not_repair(tmp_path: Path) -> No
     run = tmp_path / "live"
     _small_bag(run / "recording", seconds=1)
     (run / "recording" / "metadata.yaml").unlink()
-    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)  # simlan_data.run"])
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)  # simlan_data.apps.run"])
     cmdline = Path(f"/proc/{sleeper.pid}/cmdline")
     for _ in range(200):  # until the child has exec'd (before, /proc shows the parent's command)
         if not cmdline.exists() or b"time.sleep" in cmdline.read_bytes():

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from conftest import REPO, run_cli
-from simlan_data import evals
+from simlan_data.apps import evals
 from simlan_data.errors import ConfigError
 
 GOLDEN = REPO / "recordings" / "golden" / "two_robots"

@@ -23,7 +23,7 @@ import pytest
 import yaml
 
 from conftest import REPO
-from simlan_data import evals
+from simlan_data.apps import evals
 from simlan_data.errors import ConfigError
 from simlan_data.evaluation.suite import FAILING
 from simlan_data.evaluation.suite_spec import load_suite

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from conftest import compose_config, run_cli
+from simlan_data.algorithms.markers import MarkerObservation
+from simlan_data.config.faults import CameraFaults, with_yaw_error
+from simlan_data.config.validation import to_config
 from simlan_data.errors import ConfigError
 from simlan_data.evaluation.camera_health import CameraConsistency
-from simlan_data.evaluation.faults import CameraFaults, with_yaw_error
 from simlan_data.geometry.calibration import load_calibration
-from simlan_data.gpss.markers import MarkerObservation
 from simlan_data.recording.reader import RecordingReader
-from simlan_data.run import to_config
 
 CAMERA = load_calibration(163).camera.scaled(960, 540)
 

@@ -12,7 +12,8 @@ import polars as pl
 import pytest
 
 from conftest import run_cli
-from simlan_data.agent_types import AGENT_TYPES, MARKER_SIZE_M
+from simlan_data.algorithms.localization import Localizer, LocalizerParams
+from simlan_data.algorithms.markers import POSE_METHODS, MarkerDetector, MarkerMount, fuse
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.metrics import (
     Visibility,
@@ -20,12 +21,11 @@ from simlan_data.evaluation.metrics import (
     ground_truth,
     localization_metrics,
 )
-from simlan_data.evaluation.replay import cameras_in_recording
 from simlan_data.geometry.rotations import wrap_angle
 from simlan_data.geometry.transforms import Transform
-from simlan_data.gpss.localization import Localizer, LocalizerParams
-from simlan_data.gpss.markers import POSE_METHODS, MarkerDetector, MarkerMount, fuse
+from simlan_data.recording.cameras import cameras_in_recording
 from simlan_data.recording.reader import RecordingReader
+from simlan_data.world.agent_types import AGENT_TYPES, MARKER_SIZE_M
 
 NS = "robot_agent_1"
 TRUCK = AGENT_TYPES["pallet_truck"]
@@ -314,7 +314,7 @@ def test_background_reading_hands_over_items_in_order_and_raises_its_errors() ->
 def _reference_rois(loc: Localizer, t_ns: int, cid: str) -> list[tuple[int, int, int, int]]:
     """The regions one camera is planned to search, computed the plain way: each predicted
     marker's corners through ``CameraModel.project`` (OpenCV's distortion), one at a time."""
-    from simlan_data.gpss.markers import marker_corners_in_marker_frame
+    from simlan_data.algorithms.markers import marker_corners_in_marker_frame
 
     cam = loc.cameras[cid]
     rois = []
@@ -338,8 +338,8 @@ def test_planned_regions_of_a_frame_set_equal_the_per_camera_projection() -> Non
     image borders, with growing uncertainty: the regions planned for a whole frame set at once
     (one array, the camera model's distortion in numpy) are exactly the ones each camera's own
     projection through OpenCV gives."""
+    from simlan_data.algorithms.localization import PoseFix
     from simlan_data.geometry.calibration import available_camera_ids, load_calibration
-    from simlan_data.gpss.localization import PoseFix
 
     ids = [c for c in available_camera_ids() if 160 <= int(c) <= 171]
     assert len(ids) == 12

@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 from conftest import compose_config
-from simlan_data.agent_types import AGENT_TYPES
+from simlan_data.algorithms.coordinator import Coordinator, Intent
+from simlan_data.algorithms.dryrun import dry_run
+from simlan_data.algorithms.follower import PathFollower, PursuitParams
+from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_nav2_map
+from simlan_data.algorithms.planner import GridPlanner, PlanningError
+from simlan_data.algorithms.stack import AgentPlan, NavigationParams
+from simlan_data.config.validation import to_config
 from simlan_data.constants import MAPS_DIR
-from simlan_data.gpss.coordinator import Coordinator, Intent
-from simlan_data.gpss.dryrun import dry_run
-from simlan_data.gpss.follower import PathFollower, PursuitParams
-from simlan_data.gpss.occupancy import OccupancyGrid, grid_from_nav2_map
-from simlan_data.gpss.planner import GridPlanner, PlanningError
-from simlan_data.gpss.stack import AgentPlan, NavigationParams
-from simlan_data.run import to_config
 from simlan_data.sim.scene import load_inputs
+from simlan_data.world.agent_types import AGENT_TYPES
 
 RES = 0.05
 

@@ -1,4 +1,4 @@
-"""``python -m simlan_data.inspect``: a recording to a Rerun file, read back with the Rerun SDK."""
+"""``python -m simlan_data.view``: a recording to a Rerun file, read back with the Rerun SDK."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from rerun.chunk import RrdReader
 from rosbags.typesys import Stores, get_typestore
 
 from conftest import REPO, run_cli
+from simlan_data.apps.view import main as inspect_main
 from simlan_data.errors import ConfigError
-from simlan_data.inspect import main as inspect_main
 from simlan_data.recording.messages import compressed_image
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.recording.schema import BIRDSEYE_IMAGE, COMPRESSED_IMAGE_TYPE, Topic
@@ -38,7 +38,7 @@ def read_rrd(path: Path) -> tuple[dict[str, int], dict[str, dict[str, list[Any]]
 
 def test_inspect_writes_an_rrd_with_the_warehouse_cameras_images_and_errors(tmp_path: Path) -> None:
     rrd = tmp_path / "golden.rrd"
-    proc = run_cli(str(GOLDEN), "--save", str(rrd), module="simlan_data.inspect")
+    proc = run_cli(str(GOLDEN), "--save", str(rrd), module="simlan_data.view")
     assert proc.returncode == 0, proc.stderr
     assert "inspect: 2 cameras, 142 images, 1 agents" in proc.stdout
     rows, values = read_rrd(rrd)
@@ -186,14 +186,14 @@ def test_bad_inspect_arguments_are_refused(tmp_path: Path, args: list[str], matc
 
 
 def test_inspect_refuses_what_is_not_a_recording(tmp_path: Path) -> None:
-    proc = run_cli(str(tmp_path), "--save", str(tmp_path / "x.rrd"), module="simlan_data.inspect")
+    proc = run_cli(str(tmp_path), "--save", str(tmp_path / "x.rrd"), module="simlan_data.view")
     assert proc.returncode == 2
     assert proc.stderr.startswith("error: not a readable recording in ")
     assert not (tmp_path / "x.rrd").exists()
 
 
 def test_without_save_and_without_a_display_it_says_what_to_do() -> None:
-    proc = run_cli(str(GOLDEN), module="simlan_data.inspect", env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
+    proc = run_cli(str(GOLDEN), module="simlan_data.view", env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
         "error: no display for the Rerun viewer in this session: neither DISPLAY nor WAYLAND_DISPLAY is set; "

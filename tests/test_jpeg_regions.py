@@ -10,15 +10,15 @@ import cv2
 import numpy as np
 import pytest
 
-from simlan_data.agent_types import MARKER_SIZE_M
-from simlan_data.evaluation.replay import cameras_in_recording
-from simlan_data.gpss.jpeg_regions import decode_gray_regions, segments
-from simlan_data.gpss.localization import Localizer
-from simlan_data.gpss.markers import MarkerMount
+from simlan_data.algorithms.localization import Localizer
+from simlan_data.algorithms.markers import MarkerMount
+from simlan_data.imaging.jpeg_regions import decode_gray_regions, segments
 from simlan_data.recording import schema
+from simlan_data.recording.cameras import cameras_in_recording
 from simlan_data.recording.codecs import encode_rgb, jpeg_restart_interval
 from simlan_data.recording.messages import compressed_image_data
 from simlan_data.recording.reader import RecordingReader
+from simlan_data.world.agent_types import MARKER_SIZE_M
 
 
 @pytest.fixture(scope="module")

@@ -17,18 +17,18 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from conftest import DATASET_ARGS, REPO, run_cli
-from simlan_data._pybullet import pb
-from simlan_data.agent_types import AGENT_TYPES
+from simlan_data.algorithms.posemap.dataset import read_dataset, split_of
+from simlan_data.algorithms.posemap.estimators import CameraView, ProjectionEstimator
+from simlan_data.algorithms.posemap.motion import load_motion
 from simlan_data.constants import URDF_DIR
 from simlan_data.errors import RecordingInputError
 from simlan_data.geometry.calibration import load_calibration
-from simlan_data.gpss.posemap import skeleton as S
-from simlan_data.gpss.posemap.dataset import read_dataset, split_of
-from simlan_data.gpss.posemap.estimators import CameraView, ProjectionEstimator
-from simlan_data.gpss.posemap.motion import load_motion
 from simlan_data.sim.agents import spawn_agent
 from simlan_data.sim.pybullet_client import connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.world import skeleton as S
+from simlan_data.world._pybullet import pb
+from simlan_data.world.agent_types import AGENT_TYPES
 from simlan_data.world.builder import build_world
 from simlan_data.world.humanoid_urdf import urdf_text
 from simlan_data.world.labels import label_id
@@ -280,7 +280,7 @@ def test_drive_replays_landmarks_through_the_model(trained: tuple[Path, Path], t
     assert len(states) == 21  # 1 s at the 20 Hz control rate
     assert states[0][1] == list(S.JOINT_NAMES)
     # frame k of the dataset drives the body from k / cameras.rate_hz on
-    from simlan_data.gpss.posemap.training import TrainedMapper
+    from simlan_data.algorithms.posemap.training import TrainedMapper
 
     mapper = TrainedMapper(str(run))
     data = read_dataset(str(ds)).select_cameras(mapper.cameras)
@@ -314,7 +314,7 @@ def test_motion_run_records_a_landmark_stream_the_drive_can_replay(
     assert metrics["posemap.drive.frames"] == 6  # 1 s of 5 Hz landmark frames
     assert 0 < metrics["posemap.drive.mae_rad"] < 1.0  # against the motion run's joint states
     # the replay of the motion recording scores the same predictions: one reader, one predictor
-    from simlan_data import replay
+    from simlan_data.apps import replay
 
     out = tmp_path / "replay"
     replay.main(

@@ -10,18 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simlan_data.gpss.posemap import fit as F
-from simlan_data.gpss.posemap import skeleton as S
-from simlan_data.gpss.posemap.ambiguity import (
+from simlan_data.algorithms.posemap import fit as F
+from simlan_data.algorithms.posemap.ambiguity import (
     ambiguity_floor,
     ambiguous_groups,
     curve_medians,
     curve_tangents,
 )
-from simlan_data.gpss.posemap.dataset import read_dataset, split_of
-from simlan_data.gpss.posemap.estimators import CameraView, ProjectionEstimator
-from simlan_data.gpss.posemap.features import Rig
-from simlan_data.gpss.posemap.training import TrainedMapper
+from simlan_data.algorithms.posemap.dataset import read_dataset, split_of
+from simlan_data.algorithms.posemap.estimators import CameraView, ProjectionEstimator
+from simlan_data.algorithms.posemap.features import Rig
+from simlan_data.algorithms.posemap.training import TrainedMapper
+from simlan_data.world import skeleton as S
 
 
 def _rig(ds: Path) -> Rig:

@@ -20,15 +20,15 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from conftest import REPO, run_cli
-from simlan_data import evals, replay
+from simlan_data.algorithms.posemap.training import TrainedMapper
+from simlan_data.apps import evals, replay
 from simlan_data.errors import SimlanError
 from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
-from simlan_data.evaluation.posemap_inputs import stream_from_recording
 from simlan_data.evaluation.suite import Job
 from simlan_data.evaluation.suite_report import plot_posemap
 from simlan_data.evaluation.suite_spec import load_suite
-from simlan_data.gpss.posemap.skeleton import JOINT_NAMES
-from simlan_data.gpss.posemap.training import TrainedMapper
+from simlan_data.sim.posemap_inputs import stream_from_recording
+from simlan_data.world.skeleton import JOINT_NAMES
 
 GOLDEN = REPO / "recordings" / "golden" / "single_truck"
 

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simlan_data._pybullet import pb
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.sim.agents import AGENT_TYPES, spawn_agent
 from simlan_data.sim.dynamic_layer import MovedAgents, StaticMeshes
 from simlan_data.sim.pybullet_client import connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable, merge_rects
+from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import build_world, create_body
 from simlan_data.world.layout import load_layout
 from simlan_data.world.models import Part
@@ -221,7 +221,7 @@ def test_static_layer_follows_a_pushed_object_and_the_meshes_go_away_again() -> 
     again with the warehouse meshes back for that moment, then the meshes are removed again; the
     layered image still equals the full render."""
     from conftest import compose_config
-    from simlan_data.run import to_config
+    from simlan_data.config.validation import to_config
     from simlan_data.sim.scene import Scene, load_inputs
 
     cfg = to_config(compose_config("cameras=single", "world.settle_s=0.5", "progress=false"))

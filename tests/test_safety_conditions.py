@@ -9,10 +9,8 @@ import pytest
 from shapely.geometry import Polygon
 
 from conftest import compose_config
-from simlan_data.agent_types import AGENT_TYPES
-from simlan_data.errors import ConfigError
-from simlan_data.gpss.people import PersonDetection, PersonTracker, fuse_people
-from simlan_data.gpss.safety import (
+from simlan_data.algorithms.people import PersonDetection, PersonTracker, fuse_people
+from simlan_data.algorithms.safety import (
     DRIVE,
     SLOW,
     STOP,
@@ -26,15 +24,23 @@ from simlan_data.gpss.safety import (
     clamp_command,
     make_zone,
 )
-from simlan_data.gpss.safety.conditions import SafetyContext, contact, enters_zone, unobserved, worst_approach
-from simlan_data.gpss.safety.geometry import (
+from simlan_data.algorithms.safety.conditions import (
+    SafetyContext,
+    contact,
+    enters_zone,
+    unobserved,
+    worst_approach,
+)
+from simlan_data.algorithms.safety.geometry import (
     approach,
     footprint_polygon,
     stopping_distance_m,
     swept_rollout,
 )
-from simlan_data.run import to_config
-from simlan_data.scenarios.collision import collision_setup, travel_m
+from simlan_data.config.collision import collision_setup, travel_m
+from simlan_data.config.validation import to_config
+from simlan_data.errors import ConfigError
+from simlan_data.world.agent_types import AGENT_TYPES
 
 TRUCK = AGENT_TYPES["pallet_truck"].footprint_m
 JACKAL = AGENT_TYPES["jackal"].footprint_m

@@ -25,8 +25,8 @@ from mcap_ros2.decoder import DecoderFactory
 from shapely.geometry import Polygon
 
 from conftest import run_cli
-from simlan_data.agent_types import AGENT_TYPES
-from simlan_data.gpss.safety.geometry import footprint_polygon
+from simlan_data.algorithms.safety.geometry import footprint_polygon
+from simlan_data.world.agent_types import AGENT_TYPES
 
 ZONE = [[2.6, -2.4], [4.5, -2.4], [4.5, 3.2], [2.6, 3.2]]
 SPAWN = """# @package _global_

@@ -8,8 +8,8 @@ import pytest
 import yaml
 
 from conftest import compose_config
-from simlan_data import evals
-from simlan_data.config import register_configs
+from simlan_data.apps import evals
+from simlan_data.config.schema import register_configs
 from simlan_data.errors import ConfigError
 from simlan_data.evaluation.suite import check_jobs, job_name, plan_jobs, write_job_configs
 from simlan_data.evaluation.suite_spec import load_suite, select_faults, unmet

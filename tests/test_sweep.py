@@ -13,9 +13,10 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from conftest import compose_config, run_cli
+from simlan_data.apps.run import job_cpu_share
+from simlan_data.config.validation import to_config
 from simlan_data.errors import ConfigError
 from simlan_data.evaluation.sweep import aggregate, collect_sweep, register_sweep_report
-from simlan_data.run import job_cpu_share, to_config
 
 
 def _job(root: Path, name: str, overrides: list[str], metrics: dict[str, float] | None) -> None:
@@ -144,7 +145,7 @@ def test_parallel_launchers_give_each_job_its_share_of_the_cores() -> None:
 def test_a_job_with_one_core_runs_no_helper_threads(monkeypatch: pytest.MonkeyPatch) -> None:
     """One core per job (joblib on two cores, a Ray task): encoding on the simulation thread and
     Mesa rasterizing inline, unless the user set either; more cores or the basic launcher: as is."""
-    from simlan_data.run import single_core_job
+    from simlan_data.apps.run import single_core_job
 
     monkeypatch.delenv("LP_NUM_THREADS", raising=False)
     cfg = compose_config()

@@ -15,8 +15,13 @@ import pytest
 from reliability_cases import BOUNDARIES, Case, one_line, real_layout_loads, small_recording
 
 from conftest import run_cli
+from simlan_data.config.validation import (
+    REFERENCE_CHECKS,
+    compose_config,
+    register_reference_check,
+    require_known,
+)
 from simlan_data.errors import EXIT_BAD_INPUT, ConfigError, SimlanError
-from simlan_data.validation import REFERENCE_CHECKS, compose_config, register_reference_check, require_known
 
 ALL = [(name, case) for name, (cases, _, _) in BOUNDARIES.items() for case in cases]
 
@@ -102,7 +107,7 @@ def test_replay_cli_refuses_bad_recordings_with_exit_2(tmp_path: Path) -> None:
 
 
 def test_check_nulls_names_the_nested_key() -> None:
-    from simlan_data.validation import check_nulls
+    from simlan_data.config.validation import check_nulls
 
     with pytest.raises(ConfigError, match=r"invalid recording.jpeg_quality=None in config: must not be null"):
         check_nulls({"recording": {"jpeg_quality": None, "enabled": True}, "duration_s": 5.0})

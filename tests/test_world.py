@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simlan_data._pybullet import pb
+from simlan_data.algorithms.follower import FollowerParams, WaypointFollower
 from simlan_data.errors import AssetError
-from simlan_data.gpss.follower import FollowerParams, WaypointFollower
 from simlan_data.sim.pybullet_client import connect
+from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import PhysicsParams, build_world
 from simlan_data.world.labels import SEMANTIC_CLASSES
 from simlan_data.world.layout import load_layout

@@ -27,11 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 from skimage.metrics import structural_similarity
 
-from ..geometry.camera import CameraModel
-from ..gpss.birdseye import BirdseyeStitcher, CanvasSpec, camera_footprint
-from ..world.labels import SEMANTIC_CLASSES
-from ..world.layout import Placement
-from ..world.models import BUILDING_X_M, BUILDING_Y_M, SLAB_M, model_spec
+from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec, camera_footprint
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.world.labels import SEMANTIC_CLASSES
+from simlan_data.world.layout import Placement
+from simlan_data.world.models import BUILDING_X_M, BUILDING_Y_M, SLAB_M, model_spec
 
 FLOOR_CLASSES = (SEMANTIC_CLASSES["floor"], SEMANTIC_CLASSES["floor_marking"])
 SLAB_MODEL = "ground_visual_updated"  # the slab floor; its layout pose moves the joints

@@ -7,7 +7,7 @@ Options (``--set``): ``x_m=[-8,34]``, ``y_m=[-10,10]``, ``px_per_m=50``, ``plane
 ``eval_frames=5`` (frames scored against ground truth, spread over the recording; 0 = none);
 ``ground_truth=true`` (build the recorded world in PyBullet for the orthographic ground truth);
 ``drop_cameras=[163]``, ``yaw_error_deg=1 yaw_error_cameras=[163]`` (injected faults, see
-:mod:`~simlan_data.evaluation.faults`; default: the recording's ``faults`` section).
+:mod:`~simlan_data.config.faults`; default: the recording's ``faults`` section).
 
 Data flow::
 
@@ -31,16 +31,21 @@ import numpy as np
 from numpy.typing import NDArray
 from omegaconf import OmegaConf
 
-from ..config import BirdseyeConfig, WorldConfig
-from ..errors import ConfigError, RecordingInputError, SimlanError
-from ..gpss.birdseye import BirdseyeStitcher, CanvasSpec
-from ..gpss.birdseye_simlan import SimlanBirdseye
-from ..recording.codecs import decode_compressed, decode_raw
-from ..recording.reader import Message
-from ..world.layout import load_layout
-from .birdseye_metrics import FULL, QualityEvaluator, ground_control_points, stitcher_projections
-from .faults import CAMERA_FAULT_OPTIONS
-from .replay import ReplayContext, check_options, register
+from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec
+from simlan_data.algorithms.birdseye_simlan import SimlanBirdseye
+from simlan_data.config.faults import CAMERA_FAULT_OPTIONS
+from simlan_data.config.schema import BirdseyeConfig, WorldConfig
+from simlan_data.errors import ConfigError, RecordingInputError, SimlanError
+from simlan_data.evaluation.birdseye_metrics import (
+    FULL,
+    QualityEvaluator,
+    ground_control_points,
+    stitcher_projections,
+)
+from simlan_data.evaluation.replay import ReplayContext, check_options, register
+from simlan_data.recording.codecs import decode_compressed, decode_raw
+from simlan_data.recording.reader import Message
+from simlan_data.world.layout import load_layout
 
 REPORT_MD = "birdseye_report.md"
 REPORT_PNG = "birdseye_report.png"
@@ -86,7 +91,7 @@ def birdseye_settings(ctx: ReplayContext) -> tuple[BirdseyeConfig, int, bool]:
 
 def _ground_truth(ctx: ReplayContext, spec: CanvasSpec) -> tuple[NDArray[np.uint8], NDArray[np.uint8], Any]:
     """Orthographic render of the recorded world (settled, no agents) and its layout."""
-    from ..sim.orthographic import render_orthographic, static_world  # the simulator, only here
+    from simlan_data.sim.orthographic import render_orthographic, static_world  # the simulator, only here
 
     world_dict = ctx.config.get("world")
     try:

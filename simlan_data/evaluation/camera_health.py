@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..gpss.markers import MarkerObservation
+from simlan_data.algorithms.markers import MarkerObservation
 
 
 @dataclass

@@ -29,15 +29,12 @@ from typing import Any, TypeVar
 import numpy as np
 import polars as pl
 
-from ..agent_types import MARKER_SIZE_M, agent_type
-from ..constants import NS_PER_S
-from ..errors import ConfigError, RecordingInputError
-from ..gpss.localization import ImageSearch, Localizer, LocalizerParams
-from ..gpss.markers import MarkerMount
-from ..recording.messages import compressed_image_data
-from ..recording.reader import RecordingReader
-from .camera_health import CameraConsistency
-from .metrics import (
+from simlan_data.algorithms.localization import ImageSearch, Localizer, LocalizerParams
+from simlan_data.algorithms.markers import MarkerMount
+from simlan_data.constants import NS_PER_S
+from simlan_data.errors import ConfigError, RecordingInputError
+from simlan_data.evaluation.camera_health import CameraConsistency
+from simlan_data.evaluation.metrics import (
     RecordedRows,
     Visibility,
     estimates_from_recording,
@@ -47,7 +44,10 @@ from .metrics import (
     status_table,
     yaw_as_recorded,
 )
-from .replay import ReplayContext, register
+from simlan_data.evaluation.replay import ReplayContext, register
+from simlan_data.recording.messages import compressed_image_data
+from simlan_data.recording.reader import RecordingReader
+from simlan_data.world.agent_types import MARKER_SIZE_M, agent_type
 
 IMAGE_SUFFIX = "/image_raw/compressed"
 

@@ -24,13 +24,13 @@ import numpy as np
 import polars as pl
 from numpy.typing import NDArray
 
-from ..agent_types import MARKER_SIZE_M, AgentType
-from ..constants import NS_PER_S
-from ..geometry.camera import CameraModel
-from ..geometry.rotations import wrap_angle
-from ..gpss.markers import marker_corners_in_marker_frame
-from ..recording import schema
-from ..recording.reader import Message, RecordingReader
+from simlan_data.algorithms.markers import marker_corners_in_marker_frame
+from simlan_data.constants import NS_PER_S
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.geometry.rotations import wrap_angle
+from simlan_data.recording import schema
+from simlan_data.recording.reader import Message, RecordingReader
+from simlan_data.world.agent_types import MARKER_SIZE_M, AgentType
 
 MIN_SIDE_PX = 10.0
 

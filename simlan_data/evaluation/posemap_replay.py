@@ -31,13 +31,13 @@ import numpy as np
 import polars as pl
 from scipy.spatial.transform import Rotation
 
-from ..errors import ConfigError, RecordingInputError
-from ..geometry.camera import CameraModel
-from ..gpss.posemap.metrics import joint_errors, mpjpe, per_joint
-from ..gpss.posemap.skeleton import JOINT_NAMES, NUM_JOINTS, landmark_positions
-from ..gpss.posemap.training import TrainedMapper
-from .posemap_inputs import base_pose, landmark_cameras, read_landmark_stream
-from .replay import ReplayContext, check_options, register
+from simlan_data.algorithms.posemap.metrics import joint_errors, mpjpe, per_joint
+from simlan_data.algorithms.posemap.training import TrainedMapper
+from simlan_data.errors import ConfigError, RecordingInputError
+from simlan_data.evaluation.replay import ReplayContext, check_options, register
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.sim.posemap_inputs import base_pose, landmark_cameras, read_landmark_stream
+from simlan_data.world.skeleton import JOINT_NAMES, NUM_JOINTS, landmark_positions
 
 PREFIX = "replay.posemap"
 OPTIONS = ("model", "namespace", "position")

@@ -17,48 +17,14 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
-from ..errors import ConfigError, RecordingInputError
-from ..geometry.camera import CameraModel
-from ..geometry.transforms import Transform
-from ..recording import schema
-from ..recording.reader import RecordingReader
-from .faults import CameraFaults
-
-
-def camera_from_messages(info: Any, map_from_camera: Any, camera_id: str) -> CameraModel:
-    """A camera model from a sensor_msgs/CameraInfo and its geometry_msgs/Transform in ``map``."""
-    t, q = map_from_camera.translation, map_from_camera.rotation
-    world_from_camera = Transform.from_quat([t.x, t.y, t.z], [q.x, q.y, q.z, q.w])
-    K = np.asarray(info.k, dtype=np.float64).reshape(3, 3)
-    D = np.asarray(info.d, dtype=np.float64).reshape(-1)[:5]
-    return CameraModel(camera_id, int(info.width), int(info.height), K, D, world_from_camera.inverse())
-
-
-def cameras_in_recording(reader: RecordingReader) -> dict[str, CameraModel]:
-    """Every camera of a recording, from its first camera_info and the static transforms."""
-    infos = [t for t in sorted(reader.topics) if t.startswith("/camera_") and t.endswith("/camera_info")]
-    first = reader.firsts([schema.TF_STATIC, *infos])  # (one pass)
-    tf_static = first.get(schema.TF_STATIC)
-    if tf_static is None:
-        raise RecordingInputError(
-            "recording lacks /tf_static",
-            str(reader.path),
-            "camera poses are unknown",
-            "record with simlan_data >= 0.1",
-        )
-    frames = {t.child_frame_id: t.transform for t in tf_static.msg.transforms}
-    out: dict[str, CameraModel] = {}
-    for topic in infos:
-        cid = topic.split("/")[1].removeprefix("camera_")
-        info = first.get(topic)
-        frame = schema.camera_frame(cid)
-        if info is None or frame not in frames:
-            continue
-        out[cid] = camera_from_messages(info.msg, frames[frame], cid)
-    return out
+from simlan_data.config.faults import CameraFaults
+from simlan_data.errors import ConfigError, RecordingInputError
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.recording import schema
+from simlan_data.recording.cameras import cameras_in_recording
+from simlan_data.recording.reader import RecordingReader
 
 
 @dataclass
@@ -95,7 +61,7 @@ class ReplayContext:
     @cached_property
     def believed_cameras(self) -> dict[str, CameraModel]:
         """The cameras as the algorithms are given them: without dropped ones, with injected
-        calibration errors (see :mod:`~simlan_data.evaluation.faults`). Metrics that ask what
+        calibration errors (see :mod:`~simlan_data.config.faults`). Metrics that ask what
         the cameras could see use :attr:`cameras`."""
         return self.camera_faults.apply(self.cameras, where=f"replay of {self.reader.path}")
 

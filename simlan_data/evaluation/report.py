@@ -9,13 +9,13 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from ..constants import NS_PER_S, REPORT_FILENAME
-from ..recording.codecs import decode_compressed, decode_raw
-from ..recording.reader import RecordingReader
+from simlan_data.constants import NS_PER_S, REPORT_FILENAME
+from simlan_data.recording.codecs import decode_compressed, decode_raw
+from simlan_data.recording.reader import RecordingReader
 
 if TYPE_CHECKING:
-    from ..config import Config
-    from ..sim.simulation import RunStats
+    from simlan_data.config.schema import Config
+    from simlan_data.sim.simulation import RunStats
 
 MOSAIC_FILENAME = "report_cameras.png"
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import polars as pl
 
-from .sweep import register_sweep_report
+from simlan_data.evaluation.sweep import register_sweep_report
 
 # cameras -> real-time factor, SIMLAN (Gazebo, i9 + RTX 2070, empty world)
 SIMLAN_RTF: dict[str, dict[int, float]] = {

@@ -14,10 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..agent_types import agent_type
-from ..constants import NS_PER_S
-from ..errors import RecordingInputError
-from ..gpss.safety import (
+from simlan_data.algorithms.safety import (
     DRIVE,
     RobotEstimate,
     RobotSpec,
@@ -25,9 +22,12 @@ from ..gpss.safety import (
     SafetyParams,
     mover_of,
 )
-from ..recording import schema
-from ..recording.reader import RecordingReader
-from .metrics import _yaw, ground_truth
+from simlan_data.constants import NS_PER_S
+from simlan_data.errors import RecordingInputError
+from simlan_data.evaluation.metrics import _yaw, ground_truth
+from simlan_data.recording import schema
+from simlan_data.recording.reader import RecordingReader
+from simlan_data.world.agent_types import agent_type
 
 DRIVE_KINDS = {"diff": "robot", "walker": "person", "static": "static"}
 

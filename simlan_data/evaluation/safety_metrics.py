@@ -32,10 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..agent_types import agent_type
-from ..constants import NS_PER_S
-from ..geometry.camera import CameraModel
-from ..gpss.safety import (
+from simlan_data.algorithms.safety import (
     CAUSES,
     DRIVE,
     STOP,
@@ -44,11 +41,26 @@ from ..gpss.safety import (
     SafetyEvent,
     SafetyParams,
 )
-from ..gpss.safety.conditions import SafetyContext, contact, enters_zone, unobserved, worst_approach
-from ..gpss.safety.geometry import footprint_polygon
-from ..recording.reader import RecordingReader
-from .metrics import Visibility
-from .safety_inputs import SafetyRecording, agent_specs, read_safety_recording, safety_params, truth_movers
+from simlan_data.algorithms.safety.conditions import (
+    SafetyContext,
+    contact,
+    enters_zone,
+    unobserved,
+    worst_approach,
+)
+from simlan_data.algorithms.safety.geometry import footprint_polygon
+from simlan_data.constants import NS_PER_S
+from simlan_data.evaluation.metrics import Visibility
+from simlan_data.evaluation.safety_inputs import (
+    SafetyRecording,
+    agent_specs,
+    read_safety_recording,
+    safety_params,
+    truth_movers,
+)
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.recording.reader import RecordingReader
+from simlan_data.world.agent_types import agent_type
 
 MOVING_MPS = 0.05
 STANDSTILL_MPS = 0.02

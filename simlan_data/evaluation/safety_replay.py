@@ -26,10 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
-from ..constants import NS_PER_S
-from ..errors import RecordingInputError
-from ..gpss.people import PeopleParams, PersonTracker
-from ..gpss.safety import (
+from simlan_data.algorithms.people import PeopleParams, PersonTracker
+from simlan_data.algorithms.safety import (
     DRIVE,
     STOP,
     RobotEstimate,
@@ -39,9 +37,11 @@ from ..gpss.safety import (
     SafetyWorld,
     mover_of,
 )
-from .replay import ReplayContext, register
-from .safety_inputs import SafetyRecording, read_safety_recording, safety_params
-from .safety_metrics import Violation, evaluate
+from simlan_data.constants import NS_PER_S
+from simlan_data.errors import RecordingInputError
+from simlan_data.evaluation.replay import ReplayContext, register
+from simlan_data.evaluation.safety_inputs import SafetyRecording, read_safety_recording, safety_params
+from simlan_data.evaluation.safety_metrics import Violation, evaluate
 
 VERDICTS_MD = "safety_counterfactual.md"
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import polars as pl
 
-from .sweep import register_sweep_report
+from simlan_data.evaluation.sweep import register_sweep_report
 
 REPORT_MD = "collision_sweep.md"
 REPORT_PNG = "collision_sweep.png"

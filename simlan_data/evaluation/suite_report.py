@@ -25,12 +25,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 import polars as pl
 
-from ..constants import RECORDING_DIRNAME
-from ..recording.reader import RecordingReader
-from .birdseye_replay import REPORT_PNG as BIRDSEYE_PNG
-from .metrics import estimates_from_recording, ground_truth
-from .suite import FAILING, Job
-from .suite_spec import Case, Fault, Suite
+from simlan_data.constants import RECORDING_DIRNAME
+from simlan_data.evaluation.birdseye_replay import REPORT_PNG as BIRDSEYE_PNG
+from simlan_data.evaluation.metrics import estimates_from_recording, ground_truth
+from simlan_data.evaluation.suite import FAILING, Job
+from simlan_data.evaluation.suite_spec import Case, Fault, Suite
+from simlan_data.recording.reader import RecordingReader
 
 REPORT_NAME = "report.md"
 PLOTS_DIR = "plots"
@@ -190,9 +190,9 @@ def _estimates(
 
 def plot_trajectories(path: Path, case: Case, jobs: list[Job], out: Path) -> tuple[Path | None, Path | None]:
     """Ground truth and estimates over the floor plan, and the xy error over time, for every seed."""
-    from ..gpss.occupancy import grid_from_world
-    from ..world.layout import load_layout
-    from .replay import ReplayContext
+    from simlan_data.algorithms.occupancy import grid_from_world
+    from simlan_data.evaluation.replay import ReplayContext
+    from simlan_data.world.layout import load_layout
 
     fig, ax = plt.subplots(figsize=(11, 5.5))
     fig_e, ax_e = plt.subplots(figsize=(11, 3.2))
@@ -319,7 +319,7 @@ def copy_birdseye(path: Path, jobs: list[Job], out: Path) -> Path | None:
 
 def plot_posemap(path: Path, case: Case, jobs: list[Job], out: Path) -> Path | None:
     """Pose mapping replayed: joint MAE over time per seed, and the worst joints over all seeds."""
-    from .posemap_replay import FRAMES_FILE, JOINTS_FILE
+    from simlan_data.evaluation.posemap_replay import FRAMES_FILE, JOINTS_FILE
 
     found = [
         (j, out / "replays" / j.name / "posemap")

@@ -49,11 +49,11 @@ from typing import Any, get_type_hints
 
 import yaml
 
-from ..config import Config
-from ..constants import CONF_DIR
-from ..errors import ConfigError
-from .replay import PATH_OPTIONS, REPLAY_ALGORITHMS
-from .stats import Bound
+from simlan_data.config.schema import Config
+from simlan_data.constants import CONF_DIR
+from simlan_data.errors import ConfigError
+from simlan_data.evaluation.replay import PATH_OPTIONS, REPLAY_ALGORITHMS
+from simlan_data.evaluation.stats import Bound
 
 RUN_SOURCE = "run"
 ALL_ALGORITHMS = "*"

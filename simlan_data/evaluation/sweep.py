@@ -30,8 +30,8 @@ import yaml
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
-from ..constants import METRICS_FILENAME
-from ..errors import ConfigError
+from simlan_data.constants import METRICS_FILENAME
+from simlan_data.errors import ConfigError
 
 log = logging.getLogger(__name__)
 
@@ -119,7 +119,7 @@ def write_sweep_table(table: pl.DataFrame, sweep_dir: Path) -> tuple[Path, Path]
 def aggregate(sweep_dir: str | Path, report: str = "") -> pl.DataFrame:
     """Collect, write the table and run the named report; returns the table."""
     root = Path(sweep_dir)
-    from . import sweep_reports  # noqa: F401 - registers the packaged reports (imports this module)
+    from simlan_data.evaluation import sweep_reports  # noqa: F401 - registers the packaged reports (imports this module)
 
     if report and report not in SWEEP_REPORTS:
         raise ConfigError(

@@ -3,4 +3,4 @@
 from __future__ import annotations
 
 # Each import registers with simlan_data.evaluation.sweep.register_sweep_report(name). Add new ones here.
-from . import rtf_report  # noqa: F401
+from simlan_data.evaluation import rtf_report  # noqa: F401

@@ -18,11 +18,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..constants import CALIBRATION_DIR
-from ..errors import CalibrationError
-from .camera import CameraModel
-from .rotations import is_rotation_matrix
-from .transforms import Transform
+from simlan_data.constants import CALIBRATION_DIR
+from simlan_data.errors import CalibrationError
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.geometry.rotations import is_rotation_matrix
+from simlan_data.geometry.transforms import Transform
 
 MAX_CALIBRATION_BYTES = 1 << 20  # a calibration file is a few hundred bytes; refuse huge inputs
 P_REL_TOL = 1e-4  # relative tolerance for P == K[R|t] (files store 17 significant digits)

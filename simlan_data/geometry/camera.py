@@ -23,8 +23,8 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .rotations import FloatArray
-from .transforms import Transform
+from simlan_data.geometry.rotations import FloatArray
+from simlan_data.geometry.transforms import Transform
 
 # Slope d(r_distorted)/d(r) below which the radial model is considered no longer valid: beyond it
 # one output pixel would stretch over more than 10 pixels of the ideal image.

@@ -10,7 +10,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .rotations import FloatArray, matrix_from_quat, quat_from_matrix, quat_from_rpy, yaw_from_matrix
+from simlan_data.geometry.rotations import (
+    FloatArray,
+    matrix_from_quat,
+    quat_from_matrix,
+    quat_from_rpy,
+    yaw_from_matrix,
+)
 
 
 @dataclass(frozen=True)

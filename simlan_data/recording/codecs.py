@@ -16,7 +16,7 @@ import numpy as np
 from isal import isal_zlib
 from numpy.typing import NDArray
 
-from ..errors import RecordingInputError
+from simlan_data.errors import RecordingInputError
 
 JPEG_FORMAT = "rgb8; jpeg compressed bgr8"
 PNG_RGB_FORMAT = "rgb8; png compressed bgr8"

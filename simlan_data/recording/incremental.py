@@ -35,8 +35,8 @@ import numpy as np
 from isal import isal_zlib
 from numpy.typing import NDArray
 
-from ..gpss.jpeg_regions import EOI, RST_MARKERS, JpegSegments, segments
-from .codecs import (
+from simlan_data.imaging.jpeg_regions import EOI, RST_MARKERS, JpegSegments, segments
+from simlan_data.recording.codecs import (
     JPEG_FORMAT,
     PNG_LEVEL,
     PNG_RGB_FORMAT,

@@ -9,10 +9,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..constants import NS_PER_S
-from ..geometry.camera import CameraModel
-from ..geometry.transforms import Transform
-from . import schema
+from simlan_data.constants import NS_PER_S
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.geometry.transforms import Transform
+from simlan_data.recording import schema
 
 T = schema.typestore().types
 Time = T["builtin_interfaces/msg/Time"]

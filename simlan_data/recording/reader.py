@@ -15,10 +15,10 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
-from ..constants import FORMAT_MAJOR, NS_PER_S, RECORDING_DIRNAME
-from ..errors import RecordingInputError
-from ..run_marker import read_running, writer_alive
-from . import schema
+from simlan_data.constants import FORMAT_MAJOR, NS_PER_S, RECORDING_DIRNAME
+from simlan_data.errors import RecordingInputError
+from simlan_data.recording import schema
+from simlan_data.recording.run_marker import read_running, writer_alive
 
 METADATA_KEY_FORMAT = "simlan.format_version"
 # Every read of a topic decompresses and walks all chunks that hold it, and images share every

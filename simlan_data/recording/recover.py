@@ -27,13 +27,13 @@ from typing import Any
 import yaml
 from mcap.records import Channel, Message, Schema
 
-from ..constants import DAMAGED_SUFFIX, NS_PER_S, RECORDING_DIRNAME
-from ..errors import RecordingError, RecordingInputError
-from ..run_marker import RunMarker, mark_incomplete, read_running, writer_alive
-from . import schema
-from .reader import METADATA_KEY_FORMAT, RecordingReader
-from .salvage import Salvage, scan
-from .writer import RecordingWriter
+from simlan_data.constants import DAMAGED_SUFFIX, NS_PER_S, RECORDING_DIRNAME
+from simlan_data.errors import RecordingError, RecordingInputError
+from simlan_data.recording import schema
+from simlan_data.recording.reader import METADATA_KEY_FORMAT, RecordingReader
+from simlan_data.recording.run_marker import RunMarker, mark_incomplete, read_running, writer_alive
+from simlan_data.recording.salvage import Salvage, scan
+from simlan_data.recording.writer import RecordingWriter
 
 WORK_DIRNAME = ".recover"
 RECOVERED_KEY = "simlan.recovered"

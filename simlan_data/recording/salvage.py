@@ -38,8 +38,8 @@ if sys.version_info >= (3, 14):
 else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
     from backports import zstd
 
-from ..errors import RecordingInputError
-from . import schema
+from simlan_data.errors import RecordingInputError
+from simlan_data.recording import schema
 
 MAX_CHUNK_BYTES = (
     1 << 30

@@ -18,7 +18,7 @@ from pathlib import Path
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from ..constants import MSG_DIR
+from simlan_data.constants import MSG_DIR
 
 MAP_FRAME = "map"
 

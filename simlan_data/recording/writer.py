@@ -47,9 +47,9 @@ from rosbags.rosbag2.storage_mcap import (
     write_uint64,
 )
 
-from ..constants import NS_PER_S
-from ..errors import RecordingError
-from .schema import Topic, typestore
+from simlan_data.constants import NS_PER_S
+from simlan_data.errors import RecordingError
+from simlan_data.recording.schema import Topic, typestore
 
 MAX_PENDING = 256  # bound the messages (and frames) waiting for the file
 CHUNK_OPCODE, MESSAGE_INDEX_OPCODE = 0x06, 0x07

@@ -19,14 +19,14 @@ from pathlib import Path
 import numpy as np
 import pybullet_data
 
-from .._pybullet import pb, silence_c_output
-from ..agent_types import AGENT_TYPES, MARKER_SIZE_M, AgentType, agent_type
-from ..constants import URDF_DIR
-from ..errors import ConfigError
-from ..geometry.rotations import quat_from_yaw
-from ..geometry.transforms import Transform
-from ..world.labels import label_id
-from .markers import marker_urdf
+from simlan_data.constants import URDF_DIR
+from simlan_data.errors import ConfigError
+from simlan_data.geometry.rotations import quat_from_yaw
+from simlan_data.geometry.transforms import Transform
+from simlan_data.sim.markers import marker_urdf
+from simlan_data.world._pybullet import pb, silence_c_output
+from simlan_data.world.agent_types import AGENT_TYPES, MARKER_SIZE_M, AgentType, agent_type
+from simlan_data.world.labels import label_id
 
 __all__ = [
     "AGENT_TYPES",
@@ -248,7 +248,7 @@ def spawn_agent(
     if kind.drive == "walker":
         return WalkerAgent(client, namespace, kind, pose=pose)
     if kind.drive == "posed":
-        from .humanoid import PosedHumanoidAgent  # humanoid.py builds on this module
+        from simlan_data.sim.humanoid import PosedHumanoidAgent  # humanoid.py builds on this module
 
         return PosedHumanoidAgent(client, namespace, kind, pose=pose)
     return StaticAgent(client, namespace, kind, pose=pose)

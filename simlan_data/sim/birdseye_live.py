@@ -17,16 +17,16 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from ..config import Config
-from ..evaluation.replay import camera_from_messages
-from ..geometry.camera import CameraModel
-from ..gpss.birdseye import BirdseyeStitcher
-from ..recording import messages as M
-from ..recording import schema
-from ..recording.incremental import RgbStream
-from ..recording.writer import RecordingWriter
-from .camera_recording import _Restamped
-from .rendering import CameraImages
+from simlan_data.algorithms.birdseye import BirdseyeStitcher
+from simlan_data.config.schema import Config
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.recording import messages as M
+from simlan_data.recording import schema
+from simlan_data.recording.cameras import camera_from_messages
+from simlan_data.recording.incremental import RgbStream
+from simlan_data.recording.writer import RecordingWriter
+from simlan_data.sim.camera_recording import _Restamped
+from simlan_data.sim.rendering import CameraImages
 
 
 def cameras_as_recorded(cameras: Sequence[CameraModel]) -> list[CameraModel]:

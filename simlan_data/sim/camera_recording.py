@@ -22,14 +22,14 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import RecordingConfig
-from ..geometry.camera import CameraModel
-from ..recording import messages as M
-from ..recording import schema
-from ..recording.codecs import encode_labels
-from ..recording.incremental import DepthStream, RgbStream
-from ..recording.writer import RecordingWriter
-from .rendering import CameraImages
+from simlan_data.config.schema import RecordingConfig
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.recording import messages as M
+from simlan_data.recording import schema
+from simlan_data.recording.codecs import encode_labels
+from simlan_data.recording.incremental import DepthStream, RgbStream
+from simlan_data.recording.writer import RecordingWriter
+from simlan_data.sim.rendering import CameraImages
 
 
 class EncodedRgb(NamedTuple):

@@ -23,10 +23,10 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from .._pybullet import pb
-from ..world.builder import WorldBodies
-from .agents import Agent
-from .rendering import Aabb, LabelTable
+from simlan_data.sim.agents import Agent
+from simlan_data.sim.rendering import Aabb, LabelTable
+from simlan_data.world._pybullet import pb
+from simlan_data.world.builder import WorldBodies
 
 # m: an agent whose bounds changed less than this since it was last drawn is not drawn again
 # (0.1 mm: 1 % of a pixel at the ceiling cameras' distances)

@@ -13,10 +13,10 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from .._pybullet import pb
-from ..agent_types import AgentType
-from ..gpss.posemap.skeleton import JOINT_NAMES, LOWER, UPPER, landmark_positions
-from .agents import Agent, _load
+from simlan_data.sim.agents import Agent, _load
+from simlan_data.world._pybullet import pb
+from simlan_data.world.agent_types import AgentType
+from simlan_data.world.skeleton import JOINT_NAMES, LOWER, UPPER, landmark_positions
 
 HOLD_FORCE_N = 1000.0
 

@@ -1,6 +1,6 @@
 """Ground truth for bird's-eye views: an orthographic top-down render of the scene on a canvas.
 
-The canvas of :class:`~simlan_data.gpss.birdseye.CanvasSpec` is rendered straight down with an
+The canvas of :class:`~simlan_data.algorithms.birdseye.CanvasSpec` is rendered straight down with an
 orthographic projection, in tiles of at most EGL's 1024x768 window; each tile has its own
 frustum, so tile pixel centres are canvas pixel centres. Labels come from the segmentation mask.
 ``static_world`` builds the warehouse of a run's world config (settled as the run settles it),
@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .._pybullet import pb
-from ..config import WorldConfig
-from ..gpss.birdseye import CanvasSpec
-from ..world.builder import PhysicsParams, WorldBodies, build_world
-from ..world.layout import load_layout
-from .pybullet_client import Client, connect
-from .rendering import EGL_MAX_TILE, LabelTable
+from simlan_data.algorithms.birdseye import CanvasSpec
+from simlan_data.config.schema import WorldConfig
+from simlan_data.sim.pybullet_client import Client, connect
+from simlan_data.sim.rendering import EGL_MAX_TILE, LabelTable
+from simlan_data.world._pybullet import pb
+from simlan_data.world.builder import PhysicsParams, WorldBodies, build_world
+from simlan_data.world.layout import load_layout
 
 EYE_HEIGHT_M = 50.0  # above the roofless 8 m building
 NEAR_M, FAR_M = 1.0, 100.0  # linear depth in an orthographic view: 1.5 mm steps in 16 bits

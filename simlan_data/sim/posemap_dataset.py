@@ -27,22 +27,22 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .._pybullet import pb
-from ..agent_types import AGENT_TYPES
-from ..config import Config
-from ..constants import METRICS_FILENAME
-from ..errors import ConfigError
-from ..geometry.camera import CameraModel
-from ..gpss.posemap.dataset import PoseDataset, write_dataset
-from ..gpss.posemap.estimators import CameraView, PoseEstimator, make_estimator
-from ..gpss.posemap.skeleton import LANDMARK_INSIDE_M, NUM_LANDMARKS, sample_joints
-from ..world.builder import build_world
-from ..world.layout import load_layout
-from .agents import spawn_agent
-from .humanoid import PosedHumanoidAgent
-from .pybullet_client import Client, connect
-from .rendering import CameraRenderer, LabelTable
-from .scene import load_cameras
+from simlan_data.algorithms.posemap.dataset import PoseDataset, write_dataset
+from simlan_data.algorithms.posemap.estimators import CameraView, PoseEstimator, make_estimator
+from simlan_data.config.schema import Config
+from simlan_data.constants import METRICS_FILENAME
+from simlan_data.errors import ConfigError
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.sim.agents import spawn_agent
+from simlan_data.sim.humanoid import PosedHumanoidAgent
+from simlan_data.sim.pybullet_client import Client, connect
+from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.sim.scene import load_cameras
+from simlan_data.world._pybullet import pb
+from simlan_data.world.agent_types import AGENT_TYPES
+from simlan_data.world.builder import build_world
+from simlan_data.world.layout import load_layout
+from simlan_data.world.skeleton import LANDMARK_INSIDE_M, NUM_LANDMARKS, sample_joints
 
 log = logging.getLogger(__name__)
 

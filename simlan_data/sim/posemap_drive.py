@@ -21,21 +21,21 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import Config
-from ..constants import NS_PER_S
-from ..errors import ConfigError
-from ..evaluation.posemap_inputs import LandmarkStream, load_stream
-from ..geometry.camera import CameraModel
-from ..gpss.posemap.estimators import CameraView, ProjectionEstimator
-from ..gpss.posemap.metrics import mpjpe
-from ..gpss.posemap.motion import load_motion
-from ..gpss.posemap.skeleton import JOINT_NAMES
-from ..gpss.posemap.training import TrainedMapper
-from ..recording import messages as M
-from ..recording import schema
-from ..recording.writer import RecordingWriter
-from .humanoid import PosedHumanoidAgent
-from .rendering import CameraImages
+from simlan_data.algorithms.posemap.estimators import CameraView, ProjectionEstimator
+from simlan_data.algorithms.posemap.metrics import mpjpe
+from simlan_data.algorithms.posemap.motion import load_motion
+from simlan_data.algorithms.posemap.training import TrainedMapper
+from simlan_data.config.schema import Config
+from simlan_data.constants import NS_PER_S
+from simlan_data.errors import ConfigError
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.recording import messages as M
+from simlan_data.recording import schema
+from simlan_data.recording.writer import RecordingWriter
+from simlan_data.sim.humanoid import PosedHumanoidAgent
+from simlan_data.sim.posemap_inputs import LandmarkStream, load_stream
+from simlan_data.sim.rendering import CameraImages
+from simlan_data.world.skeleton import JOINT_NAMES
 
 
 @dataclass

@@ -5,20 +5,20 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
-from .. import __version__
-from ..config import Config
-from ..constants import FORMAT_VERSION
-from ..geometry.camera import CameraModel
-from ..geometry.transforms import Transform
-from ..gpss.localization import PoseEstimate
-from ..gpss.markers import Detection
-from ..gpss.navigation import Navigator
-from ..gpss.safety import SafetyEvent, SafetyLayer, Zone
-from ..recording import messages as M
-from ..recording import schema
-from ..recording.writer import RecordingWriter
-from ..world.labels import SEMANTIC_CLASSES
-from .agents import Agent, CollisionReading
+from simlan_data import __version__
+from simlan_data.algorithms.localization import PoseEstimate
+from simlan_data.algorithms.markers import Detection
+from simlan_data.algorithms.navigation import Navigator
+from simlan_data.algorithms.safety import SafetyEvent, SafetyLayer, Zone
+from simlan_data.config.schema import Config
+from simlan_data.constants import FORMAT_VERSION
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.geometry.transforms import Transform
+from simlan_data.recording import messages as M
+from simlan_data.recording import schema
+from simlan_data.recording.writer import RecordingWriter
+from simlan_data.sim.agents import Agent, CollisionReading
+from simlan_data.world.labels import SEMANTIC_CLASSES
 
 DEPENDENCIES = (
     "pybullet",

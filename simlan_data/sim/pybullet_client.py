@@ -6,8 +6,8 @@ import importlib.util
 import os
 from dataclasses import dataclass
 
-from .._pybullet import pb, silence_c_output
-from ..errors import ConfigError
+from simlan_data.errors import ConfigError
+from simlan_data.world._pybullet import pb, silence_c_output
 
 RENDER_BACKENDS = ("auto", "egl", "tiny")
 

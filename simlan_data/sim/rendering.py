@@ -32,9 +32,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .._pybullet import pb
-from ..geometry.camera import CameraModel, linearize_depth, opengl_projection
-from .pybullet_client import Client
+from simlan_data.geometry.camera import CameraModel, linearize_depth, opengl_projection
+from simlan_data.sim.pybullet_client import Client
+from simlan_data.world._pybullet import pb
 
 EGL_MAX_TILE = (1024, 768)  # PyBullet's EGL window size: larger requests are upsampled, so tile
 CANVAS_MARGIN_PX = 3

@@ -16,23 +16,23 @@ from pathlib import Path
 import numpy as np
 from shapely.geometry import Polygon
 
-from .._pybullet import pb
-from ..agent_types import AgentType, agent_type
-from ..config import AgentConfig, Config
-from ..constants import MAPS_DIR
-from ..errors import CalibrationError, ConfigError
-from ..geometry.calibration import Calibration, available_camera_ids, load_calibration
-from ..geometry.camera import CameraModel
-from ..gpss.occupancy import OccupancyGrid, grid_from_nav2_map, grid_from_world
-from ..world.builder import PhysicsParams, WorldBodies, build_world
-from ..world.layout import Placement, load_layout
-from ..world.models import BUILDING_X_M, BUILDING_Y_M
-from .agents import Agent, spawn_agent
-from .dynamic_layer import MovedAgents, StaticMeshes
-from .posemap_drive import DriveInputs, load_drive_inputs
-from .pybullet_client import Client, connect
-from .rendering import CameraRenderer, LabelTable
-from .urdf_check import check_urdf
+from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_nav2_map, grid_from_world
+from simlan_data.config.schema import AgentConfig, Config
+from simlan_data.constants import MAPS_DIR
+from simlan_data.errors import CalibrationError, ConfigError
+from simlan_data.geometry.calibration import Calibration, available_camera_ids, load_calibration
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.sim.agents import Agent, spawn_agent
+from simlan_data.sim.dynamic_layer import MovedAgents, StaticMeshes
+from simlan_data.sim.posemap_drive import DriveInputs, load_drive_inputs
+from simlan_data.sim.pybullet_client import Client, connect
+from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.sim.urdf_check import check_urdf
+from simlan_data.world._pybullet import pb
+from simlan_data.world.agent_types import AgentType, agent_type
+from simlan_data.world.builder import PhysicsParams, WorldBodies, build_world
+from simlan_data.world.layout import Placement, load_layout
+from simlan_data.world.models import BUILDING_X_M, BUILDING_Y_M
 
 log = logging.getLogger(__name__)
 

@@ -29,24 +29,24 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .. import __version__
-from .._pybullet import pb
-from ..config import Config
-from ..constants import FORMAT_VERSION, NS_PER_S
-from ..evaluation.faults import CameraFaults
-from ..evaluation.replay import camera_from_messages
-from ..geometry.camera import CameraModel
-from ..gpss.localization import ImageSearch, LocalizerParams
-from ..gpss.people import PeopleParams
-from ..gpss.stack import AgentPlan, GpssStack, NavigationParams
-from ..recording import messages as M
-from ..recording.writer import NullWriter, RecordingWriter
-from .birdseye_live import BirdseyeRecorder
-from .camera_recording import CameraRecorder
-from .posemap_drive import make_driver
-from .publishing import Publisher, camera_tf
-from .rendering import CameraImages
-from .scene import Inputs, Scene
+from simlan_data import __version__
+from simlan_data.algorithms.localization import ImageSearch, LocalizerParams
+from simlan_data.algorithms.people import PeopleParams
+from simlan_data.algorithms.stack import AgentPlan, GpssStack, NavigationParams
+from simlan_data.config.faults import CameraFaults
+from simlan_data.config.schema import Config
+from simlan_data.constants import FORMAT_VERSION, NS_PER_S
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.recording import messages as M
+from simlan_data.recording.cameras import camera_from_messages
+from simlan_data.recording.writer import NullWriter, RecordingWriter
+from simlan_data.sim.birdseye_live import BirdseyeRecorder
+from simlan_data.sim.camera_recording import CameraRecorder
+from simlan_data.sim.posemap_drive import make_driver
+from simlan_data.sim.publishing import Publisher, camera_tf
+from simlan_data.sim.rendering import CameraImages
+from simlan_data.sim.scene import Inputs, Scene
+from simlan_data.world._pybullet import pb
 
 
 @dataclass

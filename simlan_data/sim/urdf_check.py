@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pybullet_data
 
-from ..agent_types import AgentType
-from ..constants import URDF_DIR
-from ..errors import AssetError
+from simlan_data.constants import URDF_DIR
+from simlan_data.errors import AssetError
+from simlan_data.world.agent_types import AgentType
 
 MARKER_PLACEHOLDER = "<!-- ARUCO_MARKER -->"
 MAX_URDF_BYTES = 10 << 20

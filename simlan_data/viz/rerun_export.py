@@ -32,18 +32,18 @@ import numpy as np
 import polars as pl
 import rerun as rr
 
-from ..agent_types import agent_type
-from ..constants import NS_PER_S
-from ..errors import ConfigError
-from ..evaluation.metrics import estimates_from_recording, ground_truth
-from ..evaluation.replay import ReplayContext
-from ..geometry.rotations import wrap_angle
-from ..geometry.transforms import Transform
-from ..recording import schema
-from ..recording.reader import RecordingReader
-from ..world.layout import load_layout
-from ..world.models import model_spec
-from .blueprint import build_blueprint
+from simlan_data.constants import NS_PER_S
+from simlan_data.errors import ConfigError
+from simlan_data.evaluation.metrics import estimates_from_recording, ground_truth
+from simlan_data.evaluation.replay import ReplayContext
+from simlan_data.geometry.rotations import wrap_angle
+from simlan_data.geometry.transforms import Transform
+from simlan_data.recording import schema
+from simlan_data.recording.reader import RecordingReader
+from simlan_data.viz.blueprint import build_blueprint
+from simlan_data.world.agent_types import agent_type
+from simlan_data.world.layout import load_layout
+from simlan_data.world.models import model_spec
 
 TIMELINE = "sim_time"
 APP_ID = "simlan_data"

@@ -6,13 +6,13 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .._pybullet import pb
-from ..geometry.rotations import quat_from_rpy
-from ..geometry.transforms import Transform
-from .labels import label_id
-from .layout import Placement
-from .mesh import MeshBuilder
-from .models import ModelSpec, Part, model_spec
+from simlan_data.geometry.rotations import quat_from_rpy
+from simlan_data.geometry.transforms import Transform
+from simlan_data.world._pybullet import pb
+from simlan_data.world.labels import label_id
+from simlan_data.world.layout import Placement
+from simlan_data.world.mesh import MeshBuilder
+from simlan_data.world.models import ModelSpec, Part, model_spec
 
 MAX_SHAPES_PER_ARRAY = 16  # PyBullet's createVisualShapeArray/createCollisionShapeArray limit
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from ..gpss.posemap.skeleton import JOINTS_ALL, LINKS, MATERIALS, Visual
+from simlan_data.world.skeleton import JOINTS_ALL, LINKS, MATERIALS, Visual
 
 HEADER = """<?xml version="1.0"?>
 <!--

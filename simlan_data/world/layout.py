@@ -8,9 +8,9 @@ from pathlib import Path
 
 import polars as pl
 
-from ..constants import LAYOUT_DIR
-from ..errors import AssetError
-from .models import MODEL_SPECS
+from simlan_data.constants import LAYOUT_DIR
+from simlan_data.errors import AssetError
+from simlan_data.world.models import MODEL_SPECS
 
 FIDELITY_LEVELS = ("empty", "light", "medium", "default")
 LAYOUT_COLUMNS = {

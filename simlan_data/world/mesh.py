@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry.rotations import FloatArray
-from ..geometry.transforms import Transform
+from simlan_data.geometry.rotations import FloatArray
+from simlan_data.geometry.transforms import Transform
 
 _BOX_FACES = [
     # normal, then four corners as signs of the half extents (counter-clockwise seen from outside)

@@ -1,0 +1,216 @@
+"""Pose estimators behind one interface, all returning MediaPipe Pose's output per camera image.
+
+Output per view: float32 (33, 4) = x, y (normalised by the image width and height, as MediaPipe),
+z (depth relative to the hips' midpoint, in the same scale as x: smaller is closer to the camera)
+and visibility (0..1). A view where no person was found is all zeros.
+
+- :class:`ProjectionEstimator` (``projection``): the 33 landmarks attached to the humanoid's links
+  (``skeleton.LANDMARKS``), projected by the calibrated camera model with its lens distortion;
+  a landmark is visible when it lies in the image and the rendered depth at its pixel shows no
+  surface more than ``inside_m + depth_tolerance_m`` in front of it (self-occlusion by an arm,
+  occlusion by the world). Pixel noise is Gaussian (``noise_px``); landmarks that are not
+  visible are reported with ``hidden_noise_px`` (MediaPipe guesses hidden landmarks: their
+  positions are reported, less exactly). Deterministic for a seed.
+- :class:`MediaPipeEstimator` (``mediapipe``): MediaPipe Pose 0.10.14 (``model_complexity=1``),
+  run in its own Python environment (it needs numpy<2 and its own OpenCV) as a worker process
+  fed RGB images over a pipe; see ``mediapipe_worker.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simlan_data.errors import ConfigError, RunError
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.world.skeleton import LANDMARK_INSIDE_M, LANDMARK_NAMES, NUM_LANDMARKS
+
+ESTIMATORS = ("projection", "mediapipe")
+LEFT_HIP, RIGHT_HIP = LANDMARK_NAMES.index("left_hip"), LANDMARK_NAMES.index("right_hip")
+WORKER = Path(__file__).with_name("mediapipe_worker.py")
+
+
+@dataclass
+class CameraView:
+    """What an estimator may look at for one camera: the image, and for the projection estimator
+    the landmarks' true world positions and what hides them (the rendered depth image, or
+    ``hidden``: landmarks a ray cast found something in front of)."""
+
+    camera: CameraModel
+    rgb: NDArray[np.uint8] | None = None
+    depth_m: NDArray[np.float32] | None = None
+    landmarks_world: NDArray[np.float64] | None = None
+    hidden: NDArray[np.bool_] | None = None
+
+
+class PoseEstimator(ABC):
+    """Landmarks of the person in each view: (n_views, 33, 4) float32, MediaPipe's layout."""
+
+    name: str = ""
+
+    @abstractmethod
+    def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]: ...
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release resources (worker processes)."""
+
+    def __enter__(self) -> PoseEstimator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class ProjectionEstimator(PoseEstimator):
+    """Landmarks projected from the humanoid's links, occlusion from the rendered depth image."""
+
+    name = "projection"
+
+    def __init__(
+        self,
+        *,
+        noise_px: float = 1.0,
+        hidden_noise_px: float = 8.0,
+        z_noise: float = 0.01,
+        depth_tolerance_m: float = 0.03,
+        seed: int = 0,
+    ) -> None:
+        self.noise_px, self.hidden_noise_px, self.z_noise = noise_px, hidden_noise_px, z_noise
+        self.depth_tolerance_m = depth_tolerance_m
+        self.rng = np.random.default_rng(seed)
+
+    def visible(
+        self, view: CameraView, uv: NDArray[np.float64], z_m: NDArray[np.float64], ok: NDArray[np.bool_]
+    ) -> NDArray[np.bool_]:
+        """Landmarks inside the image with no rendered surface in front of them."""
+        cam = view.camera
+        col, row = np.rint(uv[:, 0]).astype(int), np.rint(uv[:, 1]).astype(int)
+        inside = ok & (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+        if view.depth_m is None:
+            return inside if view.hidden is None else inside & ~view.hidden
+        seen = np.zeros(len(uv), dtype=np.float64)
+        seen[inside] = view.depth_m[row[inside], col[inside]]
+        return inside & (seen > 0) & (z_m - seen <= LANDMARK_INSIDE_M + self.depth_tolerance_m)
+
+    def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]:
+        out = np.zeros((len(views), NUM_LANDMARKS, 4), dtype=np.float32)
+        for i, view in enumerate(views):
+            if view.landmarks_world is None:
+                raise ValueError("the projection estimator needs the landmarks' world positions")
+            cam = view.camera
+            pts = cam.world_to_camera(view.landmarks_world)
+            uv, ok = cam.project_camera_points(pts)
+            vis = self.visible(view, uv, pts[:, 2], ok)
+            if not vis.any():
+                continue
+            sigma = np.where(vis, self.noise_px, self.hidden_noise_px)[:, None]
+            uv = uv + self.rng.normal(size=uv.shape) * sigma
+            hips_z = 0.5 * (pts[LEFT_HIP, 2] + pts[RIGHT_HIP, 2])
+            # MediaPipe's z: relative to the hips' midpoint, in image-width units like x
+            z = (pts[:, 2] - hips_z) * cam.K[0, 0] / (max(hips_z, 1e-6) * cam.width)
+            z = z + self.rng.normal(size=z.shape) * self.z_noise
+            out[i, :, 0] = uv[:, 0] / cam.width
+            out[i, :, 1] = uv[:, 1] / cam.height
+            out[i, :, 2] = z
+            out[i, :, 3] = vis
+        return out
+
+
+class MediaPipeEstimator(PoseEstimator):
+    """MediaPipe Pose (0.10.14, model_complexity=1) in a worker process of its own environment.
+
+    Protocol (one request per image): a JSON line ``{"h": H, "w": W}`` and H*W*3 RGB bytes on the
+    worker's stdin; it answers one JSON line ``{"landmarks": [[x, y, z, v], ...]}`` (33 rows, or
+    an empty list when it finds no person).
+    """
+
+    name = "mediapipe"
+
+    def __init__(self, python: str, *, min_detection_confidence: float = 0.5) -> None:
+        exe = Path(python)
+        if not exe.exists():
+            raise ConfigError(
+                "MediaPipe environment not found",
+                f"posemap.mediapipe_python={python}",
+                "the MediaPipe estimator runs in its own virtual environment (numpy<2, its own OpenCV)",
+                "create it with `bash scripts/mediapipe_env.sh` (README: Pose mapping) or set posemap.mediapipe_python",
+            )
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+        self.proc = subprocess.Popen(
+            [str(exe), str(WORKER), "--min-detection-confidence", str(min_detection_confidence)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+        )
+        ready = self._read()
+        if ready.get("ready") is not True:
+            raise RunError(
+                "MediaPipe worker did not start",
+                str(exe),
+                str(ready.get("error", ready)),
+                "check the environment",
+            )
+        self.version = str(ready.get("mediapipe", ""))
+
+    def _read(self) -> dict:
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        if not line:
+            err = self.proc.stderr.read().decode(errors="replace") if self.proc.stderr else ""
+            tail = err.strip().splitlines()[-1] if err.strip() else "no output"
+            raise RunError("MediaPipe worker stopped", str(WORKER), tail, "run the worker by hand to see why")
+        return dict(json.loads(line))
+
+    def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]:
+        assert self.proc.stdin is not None
+        out = np.zeros((len(views), NUM_LANDMARKS, 4), dtype=np.float32)
+        for view in views:
+            if view.rgb is None:
+                raise ValueError("the MediaPipe estimator needs the RGB image")
+            rgb = np.ascontiguousarray(view.rgb, dtype=np.uint8)
+            self.proc.stdin.write(json.dumps({"h": rgb.shape[0], "w": rgb.shape[1]}).encode() + b"\n")
+            self.proc.stdin.write(rgb.tobytes())
+        self.proc.stdin.flush()
+        for i in range(len(views)):
+            rows = self._read()["landmarks"]
+            if rows:
+                out[i] = np.asarray(rows, dtype=np.float32)
+        return out
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            assert self.proc.stdin is not None
+            self.proc.stdin.close()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+
+
+def make_estimator(
+    name: str,
+    *,
+    seed: int = 0,
+    noise_px: float = 1.0,
+    hidden_noise_px: float = 8.0,
+    mediapipe_python: str = "",
+) -> PoseEstimator:
+    if name == "projection":
+        return ProjectionEstimator(noise_px=noise_px, hidden_noise_px=hidden_noise_px, seed=seed)
+    if name == "mediapipe":
+        return MediaPipeEstimator(mediapipe_python)
+    raise ConfigError(
+        f"unknown pose estimator '{name}'",
+        "posemap.estimator",
+        f"expected one of {', '.join(ESTIMATORS)}",
+        "use projection",
+    )

@@ -1,0 +1,70 @@
+"""Safety layer: one py_trees behaviour tree per robot over the estimates GPSS steers on.
+
+- ``geometry``: zones, stopping distance, swept footprints, CPA and TTC (shapely/numpy);
+- ``params``: the parameters, built and checked from the ``safety`` config section;
+- ``conditions``: the tree's inputs (``SafetyWorld``), its condition functions and outputs;
+- ``tree``: the behaviour tree of one robot and the ``SafetyLayer`` of all robots.
+"""
+
+from __future__ import annotations
+
+from simlan_data.algorithms.safety.conditions import (
+    DRIVE,
+    FREE,
+    SLOW,
+    STOP,
+    Finding,
+    Monitor,
+    Mover,
+    RobotEstimate,
+    RobotSpec,
+    SafetyDecision,
+    SafetyEvent,
+    SafetyWorld,
+)
+from simlan_data.algorithms.safety.geometry import Zone, make_zone
+from simlan_data.algorithms.safety.params import (
+    CAUSES,
+    RESUME_POLICIES,
+    CollisionParams,
+    ObservabilityParams,
+    RestrictedAreaParams,
+    SafetyParams,
+    TtcParams,
+)
+from simlan_data.algorithms.safety.tree import (
+    RobotSafetyTree,
+    SafetyLayer,
+    build_tree,
+    clamp_command,
+    mover_of,
+)
+
+__all__ = [
+    "CAUSES",
+    "DRIVE",
+    "FREE",
+    "RESUME_POLICIES",
+    "SLOW",
+    "STOP",
+    "CollisionParams",
+    "Finding",
+    "Monitor",
+    "Mover",
+    "ObservabilityParams",
+    "RestrictedAreaParams",
+    "RobotEstimate",
+    "RobotSafetyTree",
+    "RobotSpec",
+    "SafetyDecision",
+    "SafetyEvent",
+    "SafetyLayer",
+    "SafetyParams",
+    "SafetyWorld",
+    "TtcParams",
+    "Zone",
+    "build_tree",
+    "clamp_command",
+    "make_zone",
+    "mover_of",
+]

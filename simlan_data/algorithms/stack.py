@@ -1,0 +1,392 @@
+"""The GPSS loop without the simulator: localize from cameras, coordinate, plan, follow.
+
+Data flow::
+
+    camera tick:  JPEG per camera --> Localizer (detect, fuse) --> fixes
+                  segmentation per camera --> PersonDetector --> fused people --> PersonTracker
+    control tick: Localizer.estimate --> poses --> Coordinator (who waits) --+
+                  estimates, contacts, tracked people, plans --> SafetyLayer --+--> Navigator per
+                  robot (speed limits of both) --> (v, w) after the safety layer, per robot;
+                  people (walkers) walk their waypoints on their own
+
+Robots never see ground truth unless ``localization.source=ground_truth`` is asked for: other
+robots come from the localizer, people from the cameras' person detector.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from shapely.geometry import MultiPolygon, Polygon
+from shapely.ops import unary_union
+
+from simlan_data.algorithms.coordinator import Coordinator, Decision, Intent, footprint_polygon, swept_claim
+from simlan_data.algorithms.follower import FollowerParams, PursuitParams, WaypointFollower
+from simlan_data.algorithms.localization import ImageSearch, Localizer, LocalizerParams, PoseEstimate
+from simlan_data.algorithms.markers import MarkerMount
+from simlan_data.algorithms.navigation import Navigator
+from simlan_data.algorithms.occupancy import OccupancyGrid
+from simlan_data.algorithms.people import (
+    PeopleParams,
+    PersonDetection,
+    PersonDetector,
+    PersonTracker,
+    fuse_people,
+)
+from simlan_data.algorithms.planner import GridPlanner
+from simlan_data.algorithms.safety import (
+    FREE,
+    STOP,
+    RobotEstimate,
+    RobotSpec,
+    SafetyDecision,
+    SafetyLayer,
+    SafetyParams,
+    SafetyWorld,
+    clamp_command,
+    mover_of,
+)
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.world.agent_types import MARKER_SIZE_M, AgentType
+
+DRIVE_KINDS = {"diff": "robot", "walker": "person", "static": "static"}
+PERSON_FOOTPRINT = (-0.2, 0.2, -0.3, 0.3)  # the humanoid's footprint, for the coordinator
+
+
+@dataclass(frozen=True)
+class AgentPlan:
+    """What the stack needs to know about one agent."""
+
+    namespace: str
+    number: int
+    kind: AgentType
+    marker_id: int | None
+    goals: list[list[float]]
+    speed_mps: float
+    loop: bool = False
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # where it was spawned (known to GPSS)
+
+
+@dataclass(frozen=True)
+class NavigationParams:
+    clearance_m: float = 0.4
+    lookahead_m: float = 1.2
+    goal_tolerance_m: float = 0.3
+    max_yaw_rate_rps: float = 0.8
+    coordination: bool = True
+    safety_distance_m: float = 0.6
+
+
+@dataclass
+class ControlOutput:
+    commands: dict[str, tuple[float, float]] = field(default_factory=dict)
+    estimates: dict[str, PoseEstimate] = field(default_factory=dict)
+    decisions: dict[str, Decision] = field(default_factory=dict)
+    safety: dict[str, SafetyDecision] = field(default_factory=dict)
+
+
+class GpssStack:
+    """Localization, coordination and navigation for every agent of a run."""
+
+    def __init__(
+        self,
+        agents: list[AgentPlan],
+        cameras: dict[str, CameraModel],
+        grid: OccupancyGrid,
+        *,
+        nav: NavigationParams,
+        loc: LocalizerParams,
+        source: str = "camera",
+        safety: SafetyParams | None = None,
+        people: PeopleParams | None = None,
+    ) -> None:
+        self.agents = {a.namespace: a for a in agents}
+        self.grid, self.nav, self.source = grid, nav, source
+        mounts = [
+            MarkerMount(
+                a.namespace,
+                a.marker_id,
+                MARKER_SIZE_M,
+                a.kind.marker_xyz[2],
+                (a.kind.marker_xyz[0], a.kind.marker_xyz[1]),
+            )
+            for a in agents
+            if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"
+        ]
+        self.localizer = Localizer(cameras, mounts, loc)
+        self.coordinator = Coordinator(safety_distance_m=nav.safety_distance_m)
+        # the last pose GPSS knew of every robot: its spawn pose until the cameras first see it
+        self.last_known: dict[str, tuple[float, float, float]] = {a.namespace: a.pose for a in agents}
+        self.navigators: dict[str, Navigator] = {}
+        self.walkers: dict[str, WaypointFollower] = {}
+        planners: dict[float, GridPlanner] = {}
+        for a in agents:
+            if a.kind.drive == "diff":
+                radius = round(a.kind.half_width_m + nav.clearance_m, 3)
+                planner = planners.setdefault(radius, GridPlanner(grid, radius_m=radius))
+                pursuit = PursuitParams(
+                    max_speed_mps=min(a.speed_mps, a.kind.max_speed_mps),
+                    min_lookahead_m=0.6 * nav.lookahead_m,
+                    max_lookahead_m=1.6 * nav.lookahead_m,
+                    max_yaw_rate_rps=min(nav.max_yaw_rate_rps, a.kind.max_yaw_rate_rps),
+                    goal_tolerance_m=nav.goal_tolerance_m,
+                )
+                self.navigators[a.namespace] = Navigator(a.namespace, a.goals, planner, pursuit, loop=a.loop)
+            elif a.kind.drive == "walker":
+                self.walkers[a.namespace] = WaypointFollower(
+                    a.goals,
+                    FollowerParams(speed_mps=a.speed_mps, max_yaw_rate_rps=2.5, turn_in_place_rad=1.2),
+                    loop=a.loop,
+                )
+        specs = {
+            a.namespace: RobotSpec(
+                a.namespace,
+                a.kind.footprint_m,
+                min(a.speed_mps, a.kind.max_speed_mps),
+                DRIVE_KINDS.get(a.kind.drive, "static"),
+            )
+            for a in agents
+        }
+        static = [
+            m
+            for a in agents
+            if a.kind.drive == "static"
+            and (m := mover_of(specs[a.namespace], RobotEstimate(a.pose))) is not None
+        ]
+        self.safety = SafetyLayer(list(specs.values()), safety or SafetyParams(enabled=False), static=static)
+        self._cancelled: set[str] = set()
+        self._speeds: dict[str, tuple[float, float]] = {}  # last command per robot (ground-truth source)
+        # people carry no marker: GPSS finds them in the segmentation images (where there are any)
+        self.people_params = people or PeopleParams(enabled=False)
+        self.person_detector = (
+            PersonDetector(cameras, self.people_params)
+            if self.people_params.enabled and source == "camera" and self.walkers
+            else None
+        )
+        self.person_tracker = PersonTracker(self.people_params)
+        self._people_frame: list[PersonDetection] = []
+        self.last_people: list[tuple[float, float]] | None = None  # fused at the last camera tick
+
+    # ------------------------------------------------------------------------------- cameras
+    def camera_frame(
+        self, t_ns: int, camera_id: str, *, jpeg: bytes | None = None, gray: NDArray[np.uint8] | None = None
+    ) -> str | None:
+        """Let the localizer search one image; returns "full"/"roi" if it did, None if it skipped."""
+        if self.source != "camera" or camera_id not in self.localizer.cameras:
+            return None  # a camera the localizer was not given (an injected fault)
+        plan = self.localizer.search_plan(t_ns, camera_id)
+        if not plan:
+            return None
+        self.localizer.process_image(t_ns, camera_id, jpeg=jpeg, gray=gray)
+        return "full" if plan == "full" else "roi"
+
+    def search_plan(self, t_ns: int, camera_id: str) -> str | list | None:
+        """Where the localizer will search this camera's image at ``t_ns`` (None: it will not)."""
+        if self.source != "camera" or camera_id not in self.localizer.cameras:
+            return None  # not a localizer camera (e.g. dropped by a fault): recorded, never searched
+        return self.localizer.search_plan(t_ns, camera_id) or None
+
+    def camera_detections(self, t_ns: int, camera_id: str, plan: str | list, found: ImageSearch) -> str:
+        """Take what :meth:`Localizer.detect` found in a planned image (in camera order)."""
+        self.localizer.observe(t_ns, camera_id, plan, found)
+        return "full" if plan == "full" else "roi"
+
+    def people_frame(self, camera_id: str, labels: NDArray[np.uint8] | None) -> None:
+        """Let the person detector look at one camera's segmentation image."""
+        if self.person_detector is not None and labels is not None:
+            self._people_frame.extend(self.person_detector.detect(camera_id, labels))
+
+    def close_camera_tick(self, t_ns: int) -> None:
+        if self.source == "camera":
+            self.localizer.close_frame(t_ns)
+        if self.person_detector is not None:
+            self.last_people = fuse_people(self._people_frame, self.people_params.cluster_m)
+            self._people_frame = []
+            self.person_tracker.update(t_ns, self.last_people)
+
+    def robot_estimates(
+        self, estimates: dict[str, PoseEstimate], truth: dict[str, tuple[float, float, float]]
+    ) -> dict[str, RobotEstimate]:
+        """What GPSS knows of every robot, as the safety layer reads it."""
+        out = {}
+        for ns in self.navigators:
+            if self.source != "camera":
+                v, w = self._speeds.get(ns, (0.0, 0.0))
+                out[ns] = RobotEstimate(truth[ns], v, w, 0.0, 0.0, truth[ns])
+                continue
+            e = estimates.get(ns)
+            if e is None:
+                out[ns] = RobotEstimate(None, last_pose=self.last_known[ns])
+                continue
+            if not e.valid:  # withheld: only its age is known (what /<ns>/localization_status says)
+                out[ns] = RobotEstimate(None, fix_age_s=e.age_s, last_pose=self.last_known[ns])
+                continue
+            sigma = float(np.sqrt(max(e.covariance[0, 0], e.covariance[1, 1])))
+            pose = (e.x_m, e.y_m, e.yaw_rad)
+            out[ns] = RobotEstimate(pose, e.speed_mps, e.yaw_rate_rps, sigma, e.age_s, self.last_known[ns])
+        return out
+
+    # ------------------------------------------------------------------------------- control
+    def control(
+        self,
+        t_ns: int,
+        dt_s: float,
+        truth: dict[str, tuple[float, float, float]],
+        contacts: dict[str, tuple[float, tuple[str, ...]]] | None = None,
+    ) -> ControlOutput:
+        """Commands for every agent, after the safety layer. ``truth`` moves the people (walkers)
+        and steers robots only with ``source=ground_truth``; ``contacts`` are the robots' collision
+        sensor readings (max force, bodies touched)."""
+        out = ControlOutput()
+        if self.source == "camera":
+            out.estimates = self.localizer.estimate(t_ns)
+            poses = {ns: (e.x_m, e.y_m, e.yaw_rad) for ns, e in out.estimates.items() if e.valid}
+        else:
+            poses = {ns: truth[ns] for ns in self.navigators}
+        self.last_known.update(poses)
+        intents = []
+        for ns, nav in self.navigators.items():
+            if ns in poses:
+                intent = nav.intent(poses[ns], self.agents[ns].number, self.agents[ns].kind.footprint_m)
+            else:  # not localized: it stands still where it was last known, others keep clear
+                intent = Intent(
+                    ns,
+                    self.agents[ns].number,
+                    self.last_known[ns],
+                    self.agents[ns].kind.footprint_m,
+                    None,
+                    yields=False,
+                )
+            if intent is not None:
+                intents.append(intent)
+        people = self.person_tracker.people(t_ns) if self.person_detector is not None else []
+        if self.source != "camera":  # steering on ground truth: people too
+            for ns in self.walkers:
+                intents.append(
+                    Intent(ns, 10**6, truth[ns], self.agents[ns].kind.footprint_m, None, yields=False)
+                )
+                v, w = self._speeds.get(ns, (0.0, 0.0))
+                est = RobotEstimate(truth[ns], v, w, 0.0, 0.0, truth[ns])
+                if (m := mover_of(self.safety.specs[ns], est)) is not None:
+                    people.append(m)
+        for person in people:  # where the cameras see people (never their ground truth)
+            heading = float(np.arctan2(person.vy_mps, person.vx_mps))
+            intents.append(
+                Intent(
+                    person.name,
+                    10**6,
+                    (person.x_m, person.y_m, heading),
+                    PERSON_FOOTPRINT,
+                    None,
+                    yields=False,
+                )
+            )
+        if self.nav.coordination:
+            out.decisions = self.coordinator.decide(t_ns, intents)
+        if self.safety.trees:
+            world = SafetyWorld(
+                t_ns,
+                self.robot_estimates(out.estimates, truth),
+                dict(contacts or {}),
+                people,
+                {
+                    ns: (nav.plan.points_xy if nav.plan is not None else None)
+                    for ns, nav in self.navigators.items()
+                },
+                {ns: nav.goal is not None for ns, nav in self.navigators.items()},
+            )
+            out.safety = self.safety.step(world)
+        for ns, nav in self.navigators.items():
+            guard = out.safety.get(ns, FREE)
+            if guard.state == STOP:  # zero command, navigation cancelled (replanned on resume)
+                if ns not in self._cancelled:
+                    nav.cancel()
+                    self._cancelled.add(ns)
+                out.commands[ns] = (0.0, 0.0)
+                continue
+            self._cancelled.discard(ns)
+            decision = out.decisions.get(ns)
+            if decision is not None and decision.replan and ns in poses:
+                self._detour(ns, poses[ns], [i for i in intents if i.namespace != ns])
+            if guard.speed_limit_mps is not None:
+                limits = [guard.speed_limit_mps] + (
+                    [] if decision is None or decision.speed_limit_mps is None else [decision.speed_limit_mps]
+                )
+                decision = Decision(min(limits), decision.blocked_by if decision else (), False)
+            v, w = nav.step(poses.get(ns), dt_s, decision)
+            out.commands[ns] = clamp_command(guard, v, w)
+        for ns, walker in self.walkers.items():
+            x, y, yaw = truth[ns]
+            cmd = walker.step(x, y, yaw, dt_s)
+            out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
+        self._speeds = dict(out.commands)
+        return out
+
+    def _detour(self, ns: str, pose: tuple[float, float, float], others: list[Intent]) -> bool:
+        """Plan ``ns`` around the others; adopt the plan only if the coordinator will let it drive.
+
+        The detour must keep clear of the robots that drive on (their claims) and of the others'
+        footprints. The planner keeps the robot's centre a margin away from them; a long robot
+        swings its ends out in turns, so the margin grows from its half width to its
+        circumradius until the swept footprint of the whole detour is clear.
+        """
+        nav, kind = self.navigators[ns], self.agents[ns].kind
+        x0, x1, y0, y1 = kind.footprint_m
+        reach = float(np.hypot(max(abs(x0), abs(x1)), max(abs(y0), abs(y1))))
+        c = self.coordinator
+        obstacles = unary_union(
+            [
+                swept_claim(o, horizon_m=c.horizon_m, grow_m=0.5 * c.safety_distance_m)
+                if o.namespace in c.granted
+                else footprint_polygon(o.pose_xyyaw, o.footprint_m, grow_m=0.5 * c.safety_distance_m)
+                for o in others
+            ]
+        )
+        for margin in np.linspace(kind.half_width_m, reach, 5):
+            plan = nav.detour(pose[0], pose[1], self._others_mask(ns, pose, others, margin))
+            if plan is None:
+                continue
+            probe = Intent(ns, 0, pose, kind.footprint_m, plan.points_xy)
+            length = float(np.sum(np.linalg.norm(np.diff(plan.points_xy, axis=0), axis=1)))
+            claim = swept_claim(probe, horizon_m=length, grow_m=0.5 * c.safety_distance_m)
+            # its own footprint now may touch others (that is why it waits): check the path ahead
+            ahead = claim.difference(
+                footprint_polygon(pose, kind.footprint_m, grow_m=0.5 * c.safety_distance_m)
+            )
+            if not ahead.intersects(obstacles):
+                nav.adopt(plan)
+                return True
+        return False
+
+    def _others_mask(
+        self, ns: str, pose: tuple[float, float, float], others: list[Intent], margin_m: float
+    ) -> NDArray[np.bool_]:
+        """Grid cells the centre of ``ns`` must avoid on a detour: where the others stand, and where
+        the ones that drive on will drive, grown by ``margin_m`` plus the safety distance. The
+        robot's own footprint is left free: it may stand closer than that to the robot it waits
+        for and must be able to back away.
+        """
+        mask = np.zeros(self.grid.shape, dtype=np.uint8)
+        grow = margin_m + self.nav.safety_distance_m
+        for other in others:
+            moving = other.namespace in self.coordinator.granted
+            shape = (
+                swept_claim(other, horizon_m=self.coordinator.horizon_m, grow_m=grow)
+                if moving
+                else footprint_polygon(other.pose_xyyaw, other.footprint_m, grow_m=grow)
+            )
+            self._fill(mask, shape, 1)
+        self._fill(mask, footprint_polygon(pose, self.agents[ns].kind.footprint_m), 0)
+        return mask.astype(bool)
+
+    def _fill(self, mask: NDArray[np.uint8], shape: Polygon | MultiPolygon, value: int) -> None:
+        x0, y0 = self.grid.origin_xy_m
+        for poly in getattr(shape, "geoms", [shape]):
+            pts = np.asarray(poly.exterior.coords)[:, :2]
+            px = np.stack(
+                [(pts[:, 0] - x0) / self.grid.resolution_m, (pts[:, 1] - y0) / self.grid.resolution_m], axis=1
+            )
+            cv2.fillPoly(mask, [np.round(px).astype(np.int32)], value)

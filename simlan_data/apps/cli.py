@@ -1,0 +1,143 @@
+"""Command-line plumbing shared by the entry points: one-line errors and exit codes."""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import sys
+from collections.abc import Callable
+from typing import NoReturn, TextIO
+
+import yaml
+from hydra.errors import HydraException
+from omegaconf.errors import OmegaConfBaseException
+
+from simlan_data.config.validation import config_error_from
+from simlan_data.constants import CONF_DIR
+from simlan_data.errors import EXIT_BAD_INPUT, EXIT_FAILED_RUN, SimlanError
+
+log = logging.getLogger("simlan_data")
+
+
+def _root_simlan_error(err: BaseException) -> SimlanError | None:
+    seen: set[int] = set()
+    cur: BaseException | None = err
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, SimlanError):
+            return cur
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return None
+
+
+def _first_line(text: str) -> str:
+    lines = [ln.strip() for ln in str(text).splitlines() if ln.strip()]
+    return lines[0] if lines else ""
+
+
+class _StderrWithoutHydraJobError:
+    """Hydra writes 'Error executing job with overrides: ...' straight to stderr before
+    re-raising; we print our own one-line error instead, so that line is dropped."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        if text.startswith("Error executing job with overrides"):
+            return len(text)
+        return self._stream.write(text)
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._stream, name)
+
+
+def _group_options(message: str) -> str:
+    """For "Could not find 'group/option'": the options that do exist."""
+    m = re.search(r"Could not find '([^'/]+)/[^']*'", message)
+    if not m:
+        return ""
+    options = sorted(p.stem for p in (CONF_DIR / m.group(1)).glob("*.yaml"))
+    return f" (options: {', '.join(options)})" if options else ""
+
+
+def _in_chain(err: BaseException | None, kind: type[BaseException]) -> BaseException | None:
+    """The first exception of type ``kind`` among ``err`` and its causes."""
+    seen = 0
+    while err is not None and seen < 20:
+        if isinstance(err, kind):
+            return err
+        err, seen = err.__cause__ or err.__context__, seen + 1
+    return None
+
+
+def fail(message: str, code: int) -> NoReturn:
+    sys.stderr.write(f"error: {message}\n")
+    sys.stderr.flush()
+    raise SystemExit(code)
+
+
+def run_cli(
+    main: Callable[[], object], *, debug: bool = False, started: Callable[[], bool] | None = None
+) -> None:
+    """Run an entry point; turn errors into one ``error: ...`` line and exit code 2 or 1.
+
+    ``started()`` tells whether the work itself began: an unexpected error before that (inside
+    Hydra's composition) is a bad argument (2), after it a failed run (1).
+
+    Hydra prints multi-line reports for config errors and exits 1; with HYDRA_FULL_ERROR set
+    (by us, unless the user set it) it re-raises instead, and we print one line and exit 2.
+    """
+    user_full = os.environ.get("HYDRA_FULL_ERROR") == "1"
+    debug = debug or user_full or "--debug" in sys.argv
+    if "--debug" in sys.argv:
+        sys.argv.remove("--debug")
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    real_stderr = sys.stderr
+    sys.stderr = _StderrWithoutHydraJobError(real_stderr)
+    try:
+        main()
+    except SystemExit:
+        raise
+    except KeyboardInterrupt:
+        fail("interrupted", 130)
+    except BaseException as err:
+        if debug:
+            raise
+        ours = _root_simlan_error(err) or config_error_from(err)
+        if ours is not None:
+            fail(ours.line(), ours.exit_code)
+        bad_yaml = _in_chain(err, yaml.MarkedYAMLError)
+        if isinstance(bad_yaml, yaml.MarkedYAMLError):  # a config file that is not valid YAML
+            mark = bad_yaml.problem_mark
+            where = f"{mark.name}, line {mark.line + 1}" if mark is not None else "a config file"
+            fail(
+                f"invalid configuration file {where}: {bad_yaml.problem}; fix the YAML there", EXIT_BAD_INPUT
+            )
+        if isinstance(err, (HydraException, OmegaConfBaseException)):
+            msg = _first_line(str(err)) + _group_options(str(err))
+            cause = err.__cause__
+            if cause is not None and _first_line(str(cause)) and _first_line(str(cause)) not in msg:
+                msg += f": {_first_line(str(cause))}"
+            fix = "see --help for the valid groups and keys"
+            if "is not a subclass of AgentConfig" in msg:
+                # OmegaConf cannot add an entry to a typed dict from the command line
+                fix = (
+                    "new agents go in a spawn list file: write DIR/agents/NAME.yaml like "
+                    "conf/agents/four_robots.yaml and run with 'hydra.searchpath=[file://DIR]' agents=NAME"
+                )
+            fail(f"invalid configuration: {msg}; {fix}", EXIT_BAD_INPUT)
+        if started is not None and not started():  # composing the config itself failed
+            fail(
+                f"invalid configuration in command line: {type(err).__name__}: {_first_line(str(err))}; "
+                "see --help for the valid groups and keys",
+                EXIT_BAD_INPUT,
+            )
+        fail(
+            f"run failed: {type(err).__name__}: {_first_line(str(err))} (rerun with --debug for the traceback)",
+            EXIT_FAILED_RUN,
+        )
+    finally:
+        sys.stderr = real_stderr
+        if not user_full:
+            os.environ.pop("HYDRA_FULL_ERROR", None)

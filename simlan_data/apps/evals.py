@@ -1,0 +1,263 @@
+"""``python -m simlan_data.evals SUITE``: run a V&V suite of ``evals/base.yaml`` and judge it.
+
+    python -m simlan_data.evals base [--seeds N] [--reuse DIR] [--inject FAULT ...] [--accept] [--out DIR]
+    python -m simlan_data.evals golden [--inject FAULT ...] [--accept] [--regenerate]
+    python -m simlan_data.evals --list
+
+Simulates every case and seed through Hydra's launcher (or reuses the runs of an earlier output),
+replays every recording through the case's algorithms, compares each metric's 95 % interval over
+seeds with its bound and with the accepted baseline, prints a pass/fail table and writes
+``OUT/report.md`` with plots, ``OUT/metrics.parquet|csv`` (every metric) and
+``OUT/summary.parquet|csv`` (verdicts). Exit code 0: every check holds; 1: a check failed or
+regressed; 2: bad arguments. Pending checks (waiting for a capability) never count as passed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from datetime import datetime
+from pathlib import Path
+
+import polars as pl
+
+from simlan_data.apps.cli import run_cli
+from simlan_data.constants import CONF_DIR, EVALS_DIR, EVALS_OUTPUT_ROOT, METRICS_FILENAME, RECORDING_DIRNAME
+from simlan_data.errors import EXIT_FAILED_RUN, ConfigError
+from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
+from simlan_data.evaluation.suite import (
+    FAILING,
+    Job,
+    accepted,
+    collect_run_metrics,
+    judge,
+    metrics_table,
+    plan_jobs,
+    read_baseline,
+    replay_all,
+    reusable,
+    reuse,
+    simulate,
+    write_baseline,
+    write_jobs_file,
+)
+from simlan_data.evaluation.suite_report import print_table, write_report, write_tables
+from simlan_data.evaluation.suite_spec import Case, Suite, load_suite, select_faults
+
+DEFAULT_FILE = EVALS_DIR / "base.yaml"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m simlan_data.evals",
+        description="Run a V&V suite: simulate or reuse, replay, compare with bounds and baselines.",
+    )
+    p.add_argument("suite", nargs="?", help="suite name in the suite file (base, golden, ...)")
+    p.add_argument("--file", type=Path, default=DEFAULT_FILE, help=f"suite file (default {DEFAULT_FILE})")
+    p.add_argument("--list", action="store_true", help="list suites, cases and faults, and exit")
+    p.add_argument("--seeds", type=int, help="seeds per case (0..N-1; default: the suite's)")
+    p.add_argument(
+        "--only", nargs="+", default=[], metavar="CASE", help="run only these cases (or case families)"
+    )
+    p.add_argument(
+        "--reuse", type=Path, metavar="DIR", help="reuse the runs of an earlier suite output (no simulation)"
+    )
+    p.add_argument("--inject", nargs="+", default=[], metavar="FAULT", help="inject faults (see --list)")
+    p.add_argument("--accept", action="store_true", help="make the results the new baseline (on purpose)")
+    p.add_argument(
+        "--regenerate",
+        action="store_true",
+        help="re-simulate the suite's fixed recordings (golden), then accept",
+    )
+    p.add_argument("--out", type=Path, help=f"output directory (default {EVALS_OUTPUT_ROOT}/SUITE_DATE_TIME)")
+    p.add_argument(
+        "--launcher", default="joblib", help="Hydra launcher for the runs: joblib (default), basic, ray"
+    )
+    p.add_argument(
+        "--jobs", type=int, default=os.cpu_count() or 1, help="parallel runs and replays (default: cores)"
+    )
+    p.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override of every run (repeatable)"
+    )
+    p.add_argument("--no-report", action="store_true", help="skip report.md and its plots")
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    return p
+
+
+def list_suite_file(path: Path) -> str:
+    import yaml
+
+    doc = yaml.safe_load(path.read_text()) or {}
+    lines = [f"suite file {path}"]
+    for name in doc.get("suites") or {}:
+        suite = load_suite(path, name)
+        lines.append(f"suite {name}: {len(suite.cases)} cases, baseline {suite.baseline}")
+        listed: set[str] = set()
+        for c in suite.cases:
+            cells = [x for x in suite.cases if x.family == c.family]
+            if c.family in listed:
+                continue
+            listed.add(c.family)
+            name = f"{c.family} (grid of {len(cells)})" if c.grid else c.name
+            status = f"pending: {c.pending}" if c.pending else f"{len(c.seeds)} seeds, {len(c.checks)} checks"
+            if c.faults is not None:
+                status += f"; faults acting: {', '.join(c.faults) or 'none'}"
+            lines.append(f"  {name:<28} {status}")
+    suite = load_suite(path, next(iter(doc.get("suites") or {})))
+    lines.append("faults (--inject):")
+    for f in suite.faults.values():
+        status = f"pending: {f.pending}" if f.pending else "available"
+        lines.append(f"  {f.name:<20} {f.description} [{status}]")
+    return "\n".join(lines)
+
+
+def _select(suite: Suite, only: list[str]) -> list[Case]:
+    if not only:
+        return list(suite.cases)
+    names = {c.name for c in suite.cases} | {c.family for c in suite.cases}
+    unknown = [o for o in only if o not in names]
+    if unknown:
+        raise ConfigError(
+            f"unknown case {unknown[0]!r}", "--only", f"cases: {', '.join(sorted(names))}", "pick from --list"
+        )
+    return [c for c in suite.cases if c.name in only or c.family in only]
+
+
+def check_launcher(name: str) -> None:
+    """Refuse a Hydra launcher that is neither built in, installed as a plugin, nor configured."""
+    if name == "basic" or (CONF_DIR / "hydra" / "launcher" / f"{name}.yaml").is_file():
+        return
+    try:
+        found = importlib.util.find_spec(f"hydra_plugins.hydra_{name}_launcher") is not None
+    except ModuleNotFoundError:
+        found = False
+    if not found:
+        raise ConfigError(
+            f"unknown launcher {name!r}",
+            "--launcher",
+            f"no Hydra plugin hydra_plugins.hydra_{name}_launcher and no conf/hydra/launcher/{name}.yaml",
+            "use joblib or basic, or install the plugin (Ray: pip install -e '.[ray]')",
+        )
+
+
+def _out_dir(args: argparse.Namespace) -> Path:
+    stamp = f"{datetime.now():%Y%m%d_%H%M%S}"  # audit-ok: names the output directory, as Hydra's ${now}
+    out: Path = args.out or Path(EVALS_OUTPUT_ROOT) / f"{args.suite}_{stamp}"
+    if out.exists() and any(out.iterdir()):
+        raise ConfigError(
+            "output exists", str(out), "the suite never overwrites results", "choose another --out"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _regenerate(suite: Suite, jobs: list[Job], out: Path, args: argparse.Namespace) -> None:
+    """Re-simulate the fixed recordings in a scratch directory, then replace them."""
+    fixed = [j for j in jobs if j.case.recording is not None and not j.case.pending]
+    if not fixed:
+        raise ConfigError(
+            "nothing to regenerate", f"suite {suite.name}", "no case has a recording:", "drop --regenerate"
+        )
+    targets = {j.name: j.run_dir for j in fixed}
+    for j in fixed:
+        j.run_dir = out / "runs" / j.name
+    simulate(suite, fixed, [], out, launcher=args.launcher, n_jobs=args.jobs, extra=list(args.set))
+    for j in fixed:
+        if j.error:
+            raise ConfigError("regeneration failed", str(j.run_dir), j.error, f"see {out / 'simulate.log'}")
+        target = targets[j.name]
+        target.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
+            staged = Path(tmp) / "new"
+            staged.mkdir()
+            shutil.copytree(j.run_dir / RECORDING_DIRNAME, staged / RECORDING_DIRNAME)
+            shutil.copy2(j.run_dir / METRICS_FILENAME, staged / METRICS_FILENAME)
+            shutil.rmtree(target)
+            staged.rename(target)
+        j.run_dir = target
+        print(f"regenerated {target}")
+
+
+def run_suite(args: argparse.Namespace) -> int:
+    suite = load_suite(args.file, args.suite, seeds=args.seeds)
+    faults = select_faults(suite, args.inject)
+    if args.accept and faults:
+        raise ConfigError(
+            "--accept with --inject", "arguments", "a faulty run is no baseline", "drop one of them"
+        )
+    if args.reuse and args.regenerate:
+        raise ConfigError(
+            "--reuse with --regenerate", "arguments", "regenerating simulates", "drop one of them"
+        )
+    check_launcher(args.launcher)
+    if args.jobs < 1:
+        raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
+    cases = _select(suite, args.only)
+    if args.reuse is not None:
+        reusable(args.reuse)
+    out = _out_dir(args)
+    jobs = plan_jobs([c for c in cases if not c.pending], out / "runs")
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    if args.regenerate:
+        _regenerate(suite, jobs, out, args)
+    if args.reuse:
+        reuse(jobs, suite, args.reuse)
+        if faults and any(f.run for f in faults):
+            print("note: reused recordings: the faults act through the replays only (not in closed loop)")
+    else:
+        to_run = [j for j in jobs if j.case.recording is None]
+        try:
+            timings["simulate_s"] = simulate(
+                suite, to_run, faults, out, launcher=args.launcher, n_jobs=args.jobs, extra=list(args.set)
+            )
+        except ConfigError:
+            shutil.rmtree(out, ignore_errors=True)  # refused before any run: leave nothing behind
+            raise
+    write_jobs_file(jobs, suite, faults if not args.reuse else [], out)
+    collect_run_metrics(jobs)
+    timings["replay_s"] = replay_all(jobs, faults, out, n_jobs=args.jobs)
+    table = metrics_table(jobs)
+    baseline = read_baseline(suite.baseline)
+    if args.accept or args.regenerate:
+        baseline = accepted(table, cases, baseline)
+        write_baseline(baseline, suite.baseline)
+        print(f"accepted as the new baseline: {suite.baseline}")
+    summary = judge(suite, cases, jobs, table, baseline)
+    timings["total_s"] = time.perf_counter() - t0
+    write_tables(out, table, summary)
+    (out / "timings.json").write_text(json.dumps(timings, indent=2) + "\n")
+    print_table(summary)
+    if not args.no_report:
+        report = write_report(
+            out, suite, cases, jobs, table, summary, faults=faults, timings=timings, reused=args.reuse
+        )
+        print(f"report: {report}")
+    failing = summary.filter(pl.col("verdict").is_in(FAILING)).height
+    return EXIT_FAILED_RUN if failing else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.list:
+        print(list_suite_file(args.file))
+        return 0
+    if not args.suite:
+        parser.error("give a suite (e.g. base or golden) or --list")
+    return run_suite(args)
+
+
+def cli() -> None:
+    """The command line: run :func:`main`, turning errors into one line and an exit code."""
+    run_cli(lambda: sys.exit(main()))
+
+
+if __name__ == "__main__":
+    cli()

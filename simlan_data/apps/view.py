@@ -1,0 +1,100 @@
+"""``python -m simlan_data.view RECORDING``: show a recording in Rerun.
+
+    python -m simlan_data.view RECORDING --save run.rrd     write a Rerun file (headless), open it
+                                                              with `rerun run.rrd` anywhere
+    python -m simlan_data.view RECORDING                   spawn the Rerun viewer (needs a display)
+
+RECORDING is a recording directory, its run directory or its metadata.yaml. What is shown and
+where: :mod:`simlan_data.viz.rerun_export` (entity tree) and :mod:`simlan_data.viz.blueprint`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from simlan_data.apps.cli import run_cli
+from simlan_data.errors import ConfigError, RunError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m simlan_data.view", description="Show a simlan_data recording in Rerun."
+    )
+    p.add_argument("recording", help="recording directory (or its run directory, or metadata.yaml)")
+    p.add_argument(
+        "--save", type=Path, metavar="FILE.rrd", help="write a .rrd file instead of spawning a viewer"
+    )
+    p.add_argument(
+        "--image-every",
+        type=int,
+        default=1,
+        metavar="N",
+        help="log every N-th image of each camera (default 1)",
+    )
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    from simlan_data.viz.rerun_export import export  # rerun and the readers: only once the arguments are good
+
+    args = build_parser().parse_args(argv)
+    save: Path | None = args.save
+    if save is not None:
+        if save.suffix != ".rrd":
+            raise ConfigError(
+                f"invalid --save {save}", "arguments", "a Rerun file ends in .rrd", "e.g. --save run.rrd"
+            )
+        if save.exists():
+            raise ConfigError(
+                "output exists", str(save), "inspect never overwrites a file", "choose another --save"
+            )
+        save.parent.mkdir(parents=True, exist_ok=True)
+    else:
+        if sys.platform.startswith("linux") and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+        ):
+            raise ConfigError(
+                "no display for the Rerun viewer",
+                "this session",
+                "neither DISPLAY nor WAYLAND_DISPLAY is set",
+                "write a file with --save run.rrd and open it with `rerun run.rrd` where there is a display",
+            )
+        # the viewer executable ships with rerun-sdk next to this interpreter
+        os.environ["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")])
+    t0 = time.perf_counter()
+    try:
+        logged = export(args.recording, save=save, spawn=save is None, image_every=args.image_every)
+    except (RuntimeError, OSError) as err:
+        if save is None:
+            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            raise RunError(
+                "cannot start the Rerun viewer",
+                "this session",
+                f"{type(err).__name__}: {first}",
+                "write a file with --save run.rrd and open it with `rerun run.rrd` where there is a display",
+            ) from err
+        raise
+    wall = time.perf_counter() - t0
+    where = f"{save} ({save.stat().st_size / 2**20:.1f} MiB)" if save is not None else "the Rerun viewer"
+    print(
+        f"inspect: {len(logged['cameras'])} cameras, {logged['images']} images, {len(logged['agents'])} agents, "
+        f"{logged['layout_parts']} layout parts, {len(logged['markers'])} marker topics, {len(logged['events'])} event topics "
+        f"-> {where} in {wall:.1f} s"
+    )
+    if save is not None:
+        print(f"  open it with: rerun {save}")
+    return 0
+
+
+def cli() -> None:
+    """The command line: run :func:`main`, turning errors into one line and an exit code."""
+    run_cli(lambda: sys.exit(main()))
+
+
+if __name__ == "__main__":
+    cli()

@@ -1,0 +1,1 @@
+"""The run's configuration: Hydra structured-config schemas, loading and validation."""

@@ -1,0 +1,631 @@
+"""Typed configuration: the schema behind ``conf/`` (Hydra structured configs).
+
+Hydra checks types and unknown keys when it composes; ``__post_init__`` checks ranges, units and
+references when ``OmegaConf.to_object`` builds these dataclasses. Every failure is a
+:class:`~simlan_data.errors.ConfigError` naming the field, the value and the fix.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+import numpy as np
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING, DictConfig, OmegaConf
+
+from simlan_data.algorithms.birdseye import CanvasSpec
+from simlan_data.algorithms.posemap.config import PosemapConfig
+from simlan_data.algorithms.safety import SafetyParams
+from simlan_data.config import collision as collision_scenario
+from simlan_data.config.safety import CollisionScenarioConfig, SafetyConfig
+from simlan_data.errors import ConfigError
+
+NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
+STREAMS = ("rgb", "depth", "semantic")
+RGB_ENCODINGS = ("jpeg", "png", "raw")
+DEPTH_ENCODINGS = ("png", "raw")
+SEMANTIC_ENCODINGS = ("png", "raw")
+CHUNK_COMPRESSIONS = ("zstd", "none")
+CALIBRATION_CHECKS = ("warn", "error")
+RENDER_BACKENDS = ("auto", "egl", "tiny")
+FIDELITIES = ("empty", "light", "medium", "default")
+
+
+def _incomplete(obj: Any) -> bool:
+    """True while OmegaConf builds the schema itself (fields still MISSING): skip checks then."""
+    return any(
+        getattr(obj, f) == MISSING for f in obj.__dataclass_fields__ if isinstance(getattr(obj, f), str)
+    )
+
+
+_bad = ConfigError.invalid  # invalid KEY=VALUE in config: WHY; FIX
+
+
+def _positive(field_name: str, value: float, fix: str) -> None:
+    if not value > 0:
+        raise _bad(field_name, value, "must be > 0", fix)
+
+
+def _choice(field_name: str, value: str, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise _bad(
+            field_name, value, f"expected one of {', '.join(choices)}", f"set {field_name}={choices[0]}"
+        )
+
+
+def _divides(field_name: str, rate_hz: float, physics_hz: int) -> None:
+    if not rate_hz > 0:
+        raise _bad(field_name, rate_hz, "must be > 0", f"use a divisor of world.physics_hz={physics_hz}")
+    steps = physics_hz / rate_hz
+    if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
+        whole = [d for d in range(1, physics_hz + 1) if physics_hz % d == 0]
+        below = max((d for d in whole if d < rate_hz), default=whole[0])
+        above = min((d for d in whole if d > rate_hz), default=whole[-1])
+        raise _bad(
+            field_name,
+            rate_hz,
+            f"the simulation steps at world.physics_hz={physics_hz}; a rate must be a whole number of steps",
+            f"use a divisor of {physics_hz}, e.g. {below} or {above}",
+        )
+
+
+@dataclass
+class ObjectPhysicsConfig:
+    """Physics parameters of one class of world objects."""
+
+    mass_kg: float = 0.0
+    lateral_friction: float = 0.8
+    rolling_friction: float = 0.0
+    spinning_friction: float = 0.0
+    restitution: float = 0.0
+    linear_damping: float = 0.04
+    angular_damping: float = 0.04
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        for name in (
+            "mass_kg",
+            "lateral_friction",
+            "rolling_friction",
+            "spinning_friction",
+            "linear_damping",
+            "angular_damping",
+        ):
+            if getattr(self, name) < 0:
+                raise _bad(
+                    f"world.physics.*.{name}",
+                    getattr(self, name),
+                    "must be >= 0",
+                    f"set {name} to a non-negative value",
+                )
+        if not 0 <= self.restitution <= 1:
+            raise _bad("world.physics.*.restitution", self.restitution, "must be in [0, 1]", "use e.g. 0.1")
+
+
+def _default_physics() -> dict[str, ObjectPhysicsConfig]:
+    return {
+        "floor": ObjectPhysicsConfig(lateral_friction=1.0),
+        "structure": ObjectPhysicsConfig(lateral_friction=0.7),
+        "shelf": ObjectPhysicsConfig(lateral_friction=0.6),
+        "box": ObjectPhysicsConfig(mass_kg=30.0, lateral_friction=0.6, restitution=0.05),
+        "pallet": ObjectPhysicsConfig(mass_kg=25.0, lateral_friction=0.7, restitution=0.05),
+    }
+
+
+@dataclass
+class WorldConfig:
+    """The warehouse: SIMLAN's layout table, a fidelity level and physics."""
+
+    layout: str = "warehouse_layout.csv"
+    fidelity: str = "default"
+    physics_hz: int = 240
+    gravity_mps2: float = 9.81
+    settle_s: float = 2.0
+    physics: dict[str, ObjectPhysicsConfig] = field(default_factory=_default_physics)
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("world.fidelity", self.fidelity, FIDELITIES)
+        if not 60 <= self.physics_hz <= 2000:
+            raise _bad("world.physics_hz", self.physics_hz, "must be within 60..2000 Hz", "use 240")
+        if not 0 <= self.settle_s <= 60:
+            raise _bad("world.settle_s", self.settle_s, "must be within 0..60 s", "use 2.0")
+        if not 0 <= self.gravity_mps2 <= 100:
+            raise _bad("world.gravity_mps2", self.gravity_mps2, "must be within 0..100 m/s^2", "use 9.81")
+
+
+@dataclass
+class CameraSetConfig:
+    """A set of calibrated cameras and how they render."""
+
+    name: str = "gpss"
+    ids: list[int] = MISSING
+    count: int = 0  # use only the first `count` of ids (0: all); sweeps take subsets with it
+    rate_hz: float = 5.0
+    width: int = 960
+    height: int = 540
+    streams: list[str] = field(default_factory=lambda: list(STREAMS))
+    distortion: bool = True
+    near_m: float = 1.0
+    far_m: float = 100.0
+    calibration_dir: str = ""
+    calibration_check: str = "warn"
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if len(self.ids) == 0:
+            raise _bad(
+                "cameras.ids",
+                list(self.ids),
+                "no camera selected",
+                "list at least one id, e.g. cameras.ids=[160]",
+            )
+        if len(set(self.ids)) != len(self.ids):
+            raise _bad("cameras.ids", list(self.ids), "an id appears twice", "list each camera once")
+        if not 0 <= self.count <= len(self.ids):
+            raise _bad(
+                "cameras.count",
+                self.count,
+                f"must be within 0..{len(self.ids)} (the number of cameras.ids; 0 = all)",
+                f"use e.g. cameras.count={min(4, len(self.ids))}",
+            )
+        if self.count:
+            self.ids = list(self.ids[: self.count])
+        _positive("cameras.rate_hz", self.rate_hz, "use e.g. cameras.rate_hz=5")
+        if not (16 <= self.width <= 7680 and 16 <= self.height <= 4320):
+            raise _bad(
+                "cameras.width x height",
+                f"{self.width}x{self.height}",
+                "must be within 16x16..7680x4320",
+                "use e.g. 960x540",
+            )
+        for s in self.streams:
+            _choice("cameras.streams[]", s, STREAMS)
+        if "rgb" not in self.streams:
+            raise _bad(
+                "cameras.streams",
+                list(self.streams),
+                "rgb is required (localization and recording need it)",
+                "add rgb",
+            )
+        if not 0 < self.near_m < self.far_m:
+            raise _bad(
+                "cameras.near_m/far_m",
+                (self.near_m, self.far_m),
+                "need 0 < near_m < far_m",
+                "use near_m=1.0 far_m=100.0",
+            )
+        _choice("cameras.calibration_check", self.calibration_check, CALIBRATION_CHECKS)
+
+
+@dataclass
+class RenderConfig:
+    """Renderer: PyBullet's EGL plugin (software or GPU) or TinyRenderer, layered or full."""
+
+    backend: str = "auto"
+    layered: bool = True
+    software_gl_threads: int = 1
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("render.backend", self.backend, RENDER_BACKENDS)
+        if not 0 <= self.software_gl_threads <= 64:
+            raise _bad(
+                "render.software_gl_threads",
+                self.software_gl_threads,
+                "must be within 0..64 (0: Mesa's default)",
+                "use 1",
+            )
+
+
+@dataclass
+class RecordingConfig:
+    """What the ROS 2 bag holds and how it is encoded and flushed."""
+
+    enabled: bool = True
+    rgb_encoding: str = "jpeg"
+    jpeg_quality: int = 85
+    depth_encoding: str = "png"
+    semantic_encoding: str = "png"
+    depth_rate_hz: float = 1.0
+    semantic_rate_hz: float = 1.0
+    ground_truth_rate_hz: float = 60.0
+    compression: str = "zstd"
+    compression_level: int = 2
+    flush_period_s: float = 1.0
+    fsync: bool = False  # also force each flush to the disk: bounded loss on a power cut, not just a kill
+    encode_threads: int = 2
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("recording.rgb_encoding", self.rgb_encoding, RGB_ENCODINGS)
+        _choice("recording.depth_encoding", self.depth_encoding, DEPTH_ENCODINGS)
+        _choice("recording.semantic_encoding", self.semantic_encoding, SEMANTIC_ENCODINGS)
+        _choice("recording.compression", self.compression, CHUNK_COMPRESSIONS)
+        if not -7 <= self.compression_level <= 22:
+            raise _bad(
+                "recording.compression_level",
+                self.compression_level,
+                "zstd levels are -7..22",
+                "use 2 (the default)",
+            )
+        if not 1 <= self.jpeg_quality <= 100:
+            raise _bad("recording.jpeg_quality", self.jpeg_quality, "must be within 1..100", "use 90")
+        if not 50 <= self.ground_truth_rate_hz <= 1000:
+            raise _bad(
+                "recording.ground_truth_rate_hz",
+                self.ground_truth_rate_hz,
+                "ground truth must be recorded at 50 Hz or more",
+                "use 60",
+            )
+        _positive(
+            "recording.flush_period_s",
+            self.flush_period_s,
+            "use 1.0 (at most one second of data lost on a crash)",
+        )
+        if not 0 <= self.encode_threads <= 16:
+            raise _bad(
+                "recording.encode_threads",
+                self.encode_threads,
+                "must be within 0..16 (0 encodes on the simulation thread)",
+                "use 2",
+            )
+
+
+@dataclass
+class BirdseyeConfig:
+    """The live bird's-eye view (``/birdseye/image``) and the canvas replays use by default."""
+
+    rate_hz: float = 0.0  # 0: no live topic
+    x_m: list[float] = field(default_factory=lambda: [-8.0, 34.0])
+    y_m: list[float] = field(default_factory=lambda: [-10.0, 10.0])
+    px_per_m: float = 50.0
+    plane_z_m: float = 0.0
+    feather_m: float = 0.2
+    jpeg_quality: int = 85
+
+    def canvas(self, where: str = "config") -> CanvasSpec:
+        """The canvas; raises ConfigError naming the field if it is unusable."""
+        return CanvasSpec(self.x_m, self.y_m, self.px_per_m, self.plane_z_m, where=where)  # type: ignore[arg-type]
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if not 0 <= self.rate_hz <= 100:
+            raise _bad(
+                "birdseye.rate_hz",
+                self.rate_hz,
+                "must be within 0..100 Hz (0: off)",
+                "use e.g. birdseye.rate_hz=1",
+            )
+        if not 0 < self.feather_m <= 5:
+            raise _bad("birdseye.feather_m", self.feather_m, "must be within (0, 5] m", "use 0.2")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise _bad("birdseye.jpeg_quality", self.jpeg_quality, "must be within 1..100", "use 85")
+        self.canvas()
+
+
+@dataclass
+class AgentConfig:
+    """One agent (SIMLAN's ROBOTS/HUMANOIDS entries): type, initial pose, marker id, goals.
+
+    Agents are keyed by namespace (robot_agent_N) in ``agents``; the marker id defaults to N.
+    Robots plan to their goals in order and steer on the camera estimate; a humanoid walks
+    straight from goal to goal; a Panda stays where it is.
+    """
+
+    type: str = "pallet_truck"
+    pose: list[float] = field(default_factory=list)  # [x_m, y_m, yaw_rad]; empty: not spawned
+    marker_id: Optional[int] = None  # noqa: UP045 - OmegaConf needs typing.Optional
+    goals: list[list[float]] = field(default_factory=list)
+    speed_mps: float = 1.0
+    loop: bool = False
+    namespace: str = ""  # set from the key in ``agents``
+
+    def check(self, namespace: str) -> None:
+        self.namespace = namespace
+        m = NAMESPACE_RE.match(namespace)
+        if not m:
+            raise _bad(
+                "agents",
+                namespace,
+                "agent keys must be robot_agent_N (SIMLAN's namespaces)",
+                "rename it, e.g. robot_agent_1",
+            )
+        if self.marker_id is None:
+            self.marker_id = int(m.group(1))
+        if not 0 <= self.marker_id < 1000:
+            raise _bad(
+                f"agents.{namespace}.marker_id",
+                self.marker_id,
+                "DICT_5X5_1000 has ids 0..999",
+                "use the N of robot_agent_N",
+            )
+        if len(self.pose) == 0:
+            # a scenario (or an override) set goals or a speed for an agent no spawn list has
+            raise ConfigError(
+                f"unknown agent {namespace}",
+                "config",
+                "something refers to it (a scenario's goals, an override) but the spawn list does not spawn it (no pose)",
+                "choose a spawn list that has it (e.g. agents=four_robots) or add it to yours with a type and pose",
+            )
+        if len(self.pose) != 3:
+            raise _bad(
+                f"agents.{namespace}.pose",
+                list(self.pose),
+                "expected [x_m, y_m, yaw_rad]",
+                "give three numbers",
+            )
+        if abs(self.pose[2]) > 2 * math.pi + 1e-6:
+            raise _bad(
+                f"agents.{namespace}.pose[2]",
+                self.pose[2],
+                "yaw_rad must be within [-2 pi, 2 pi] radians (this looks like degrees)",
+                f"give radians, e.g. {math.radians(self.pose[2]):.4f}",
+            )
+        for i, goal in enumerate(self.goals):
+            if len(goal) != 2:
+                raise _bad(
+                    f"agents.{namespace}.goals[{i}]",
+                    list(goal),
+                    "expected [x_m, y_m]",
+                    "give two numbers per goal",
+                )
+        if not 0 < self.speed_mps <= 3.0:
+            raise _bad(
+                f"agents.{namespace}.speed_mps", self.speed_mps, "must be within (0, 3] m/s", "use e.g. 1.0"
+            )
+
+    @property
+    def number(self) -> int:
+        m = NAMESPACE_RE.match(self.namespace)
+        assert m is not None
+        return int(m.group(1))
+
+
+@dataclass
+class LocalizationConfig:
+    """Camera-based localization (GPSS)."""
+
+    source: str = "camera"  # camera | ground_truth (robots steer on this)
+    method: str = "ground"  # ground (marker-plane ray intersection) | pnp (IPPE_SQUARE)
+    unobserved_timeout_s: float = 0.5
+    lost_timeout_s: float = 1.5
+    processing_delay_s: float = 0.0
+    bias_m: list[float] = field(default_factory=lambda: [0.0, 0.0])  # fault injection: added to every fix
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("localization.source", self.source, ("camera", "ground_truth"))
+        _choice("localization.method", self.method, ("ground", "pnp"))
+        _positive("localization.unobserved_timeout_s", self.unobserved_timeout_s, "use 0.5")
+        if self.lost_timeout_s < self.unobserved_timeout_s:
+            raise _bad(
+                "localization.lost_timeout_s",
+                self.lost_timeout_s,
+                "must be >= localization.unobserved_timeout_s",
+                "use 1.5",
+            )
+        if not 0 <= self.processing_delay_s <= 5:
+            raise _bad(
+                "localization.processing_delay_s", self.processing_delay_s, "must be within 0..5 s", "use 0"
+            )
+        if len(self.bias_m) != 2:
+            raise _bad("localization.bias_m", list(self.bias_m), "expected [x_m, y_m]", "use [0.0, 0.0]")
+
+
+@dataclass
+class NavigationConfig:
+    """Occupancy grid, planner, path follower and multi-robot coordination."""
+
+    map: str = "world"  # world (from the layout) | simlan (SIMLAN's Nav2 map)
+    resolution_m: float = 0.1
+    clearance_m: float = 0.4  # planned paths keep half the robot's width plus this from obstacles
+    lookahead_m: float = 1.2
+    goal_tolerance_m: float = 0.3
+    max_yaw_rate_rps: float = 0.8
+    coordination: bool = True
+    safety_distance_m: float = 0.6  # robots keep at least this between footprints
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        _choice("navigation.map", self.map, ("world", "simlan"))
+        if not 0.02 <= self.resolution_m <= 0.5:
+            raise _bad("navigation.resolution_m", self.resolution_m, "must be within 0.02..0.5 m", "use 0.1")
+        for name in (
+            "clearance_m",
+            "lookahead_m",
+            "goal_tolerance_m",
+            "max_yaw_rate_rps",
+            "safety_distance_m",
+        ):
+            _positive(f"navigation.{name}", getattr(self, name), "use a positive value")
+
+
+@dataclass
+class PerturbationConfig:
+    """Seeded perturbations (V&V statistics): what ``seed`` changes in a run; all 0 = none.
+
+    Each agent's spawn pose moves by a uniform offset within +-spawn_xy_m in x and y and
+    +-spawn_yaw_deg in yaw, drawn from a generator seeded by (seed, agent number): deterministic
+    per seed and independent of the other agents. Applied once, when the typed config is built,
+    so the scene, the GPSS stack and the spawn checks all see the same pose.
+    """
+
+    spawn_xy_m: float = 0.0
+    spawn_yaw_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if not 0 <= self.spawn_xy_m <= 2.0:
+            raise _bad("perturbation.spawn_xy_m", self.spawn_xy_m, "must be within 0..2 m", "use e.g. 0.15")
+        if not 0 <= self.spawn_yaw_deg <= 45.0:
+            raise _bad(
+                "perturbation.spawn_yaw_deg", self.spawn_yaw_deg, "must be within 0..45 degrees", "use e.g. 3"
+            )
+
+
+@dataclass
+class FaultsConfig:
+    """Injected faults (V&V): what the GPSS algorithms receive or believe, never the simulated world.
+
+    Rendering and the recording stay true (the cameras still see and record); the localizer is
+    given fewer images or a wrong calibration. ``localization.bias_m`` and
+    ``localization.processing_delay_s`` are the other injectable faults.
+    """
+
+    drop_cameras: list[int] = field(default_factory=list)  # their images never reach the localizer
+    yaw_error_deg: float = 0.0  # added to the believed yaw of each camera in yaw_error_cameras
+    yaw_error_cameras: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        if not -30.0 <= self.yaw_error_deg <= 30.0:
+            raise _bad(
+                "faults.yaw_error_deg", self.yaw_error_deg, "must be within -30..30 degrees", "use 1.0"
+            )
+
+
+@dataclass
+class ScenarioConfig:
+    name: str = "default"
+    description: str = ""
+
+
+@dataclass
+class Config:
+    """A run: (config, seed) -> recording + metrics."""
+
+    seed: int = 0
+    duration_s: float = 60.0
+    control_rate_hz: float = 20.0
+    progress: bool = True
+    scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
+    world: WorldConfig = field(default_factory=WorldConfig)
+    cameras: CameraSetConfig = field(default_factory=CameraSetConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    recording: RecordingConfig = field(default_factory=RecordingConfig)
+    localization: LocalizationConfig = field(default_factory=LocalizationConfig)
+    navigation: NavigationConfig = field(default_factory=NavigationConfig)
+    agents: dict[str, AgentConfig] = field(default_factory=dict)
+    birdseye: BirdseyeConfig = field(default_factory=BirdseyeConfig)
+    posemap: PosemapConfig = field(default_factory=PosemapConfig)
+    perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
+    faults: FaultsConfig = field(default_factory=FaultsConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
+
+    def __post_init__(self) -> None:
+        if _incomplete(self):
+            return
+        self.posemap.check()
+        if not 0 < self.duration_s <= 24 * 3600:
+            raise _bad(
+                "duration_s", self.duration_s, "must be within (0, 86400] seconds", "use e.g. duration_s=60"
+            )
+        if not 0 <= self.seed < 2**32:
+            raise _bad("seed", self.seed, "must be within 0..2^32-1", "use e.g. seed=0")
+        physics_hz = self.world.physics_hz
+        _divides("control_rate_hz", self.control_rate_hz, physics_hz)
+        _divides("cameras.rate_hz", self.cameras.rate_hz, physics_hz)
+        _divides("recording.ground_truth_rate_hz", self.recording.ground_truth_rate_hz, physics_hz)
+        for name in ("depth_rate_hz", "semantic_rate_hz"):
+            rate = getattr(self.recording, name)
+            _positive(f"recording.{name}", rate, f"use a divisor of cameras.rate_hz={self.cameras.rate_hz}")
+            frames = self.cameras.rate_hz / rate
+            if rate > self.cameras.rate_hz or abs(frames - round(frames)) > 1e-9:
+                raise _bad(
+                    f"recording.{name}",
+                    rate,
+                    f"must divide the camera rate cameras.rate_hz={self.cameras.rate_hz} (every n-th frame is recorded)",
+                    f"use e.g. {self.cameras.rate_hz} or {self.cameras.rate_hz / 5:g}",
+                )
+        if self.birdseye.rate_hz > 0:
+            frames = self.cameras.rate_hz / self.birdseye.rate_hz
+            if frames < 1 - 1e-9 or abs(frames - round(frames)) > 1e-9:
+                raise _bad(
+                    "birdseye.rate_hz",
+                    self.birdseye.rate_hz,
+                    f"must divide the camera rate cameras.rate_hz={self.cameras.rate_hz} (every n-th camera frame is stitched)",
+                    f"use e.g. {self.cameras.rate_hz:g} or {self.cameras.rate_hz / 5:g}",
+                )
+        seen_marker: dict[int, str] = {}
+        ordered: dict[str, AgentConfig] = {}
+        for ns in sorted(self.agents, key=lambda k: (len(k), k)):
+            agent = self.agents[ns]
+            agent.check(ns)
+            assert agent.marker_id is not None
+            if agent.marker_id in seen_marker:
+                raise _bad(
+                    f"agents.{ns}.marker_id",
+                    agent.marker_id,
+                    f"already used by {seen_marker[agent.marker_id]}",
+                    "give every robot its own marker id",
+                )
+            seen_marker[agent.marker_id] = ns
+            ordered[ns] = agent
+        self.agents = ordered
+        for cid in [*self.faults.drop_cameras, *self.faults.yaw_error_cameras]:
+            if cid not in self.cameras.ids:
+                raise _bad(
+                    "faults",
+                    cid,
+                    "not one of cameras.ids",
+                    f"use one of {', '.join(map(str, self.cameras.ids))}",
+                )
+        self._jitter_spawn_poses()
+        self.safety_params()  # namespaces named in the safety section must be agents of the run
+
+    def _jitter_spawn_poses(self) -> None:
+        """Move every agent's spawn pose by its seeded offset (see PerturbationConfig)."""
+        jitter = self.perturbation
+        if jitter.spawn_xy_m == 0 and jitter.spawn_yaw_deg == 0:
+            return
+        for agent in self.agents.values():
+            rng = np.random.default_rng([self.seed, agent.number])
+            dx, dy = rng.uniform(-jitter.spawn_xy_m, jitter.spawn_xy_m, size=2)
+            dyaw = np.radians(rng.uniform(-jitter.spawn_yaw_deg, jitter.spawn_yaw_deg))
+            x, y, yaw = (float(v) for v in agent.pose)
+            agent.pose = [x + float(dx), y + float(dy), yaw + float(dyaw)]
+
+    def safety_params(self) -> SafetyParams:
+        """The safety trees' parameters for this run (rates from the run's clocks)."""
+        return self.safety.params(
+            control_rate_hz=self.control_rate_hz,
+            camera_rate_hz=self.cameras.rate_hz,
+            processing_delay_s=self.localization.processing_delay_s,
+            coordinated=self.navigation.coordination,
+            known_namespaces=list(self.agents),
+        )
+
+    @property
+    def agent_list(self) -> list[AgentConfig]:
+        """Agents in namespace order."""
+        return list(self.agents.values())
+
+
+def _collision_setup(key: str, *, _root_: DictConfig) -> Any:
+    """``${collision_setup:KEY}``: agent poses and goals of scenario=collision from its ``collision`` section."""
+    section = OmegaConf.to_container(_root_.collision, resolve=True)
+    assert isinstance(section, dict)
+    return collision_scenario.resolve(key, section)
+
+
+def register_configs() -> None:
+    """Register the schema with Hydra's ConfigStore (conf/config.yaml lists it first)."""
+    cs = ConfigStore.instance()
+    cs.store(name="simlan_schema", node=Config)
+    if not OmegaConf.has_resolver("collision_setup"):
+        OmegaConf.register_new_resolver("collision_setup", _collision_setup)

@@ -1,0 +1,1 @@
+"""Image-level helpers shared by the algorithms and the recorder (JPEG restart-segment regions)."""

@@ -1,1 +1,0 @@
-"""Scenario generators: config values computed from a scenario's parameters (pure, no simulator)."""
