@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from simlan_data.sim.agents import Agent, _load
+from simlan_data.sim.agent_base import Agent, load_body
 from simlan_data.world._pybullet import pb
 from simlan_data.world.agent_types import AgentType
 from simlan_data.world.skeleton import JOINT_NAMES, LOWER, UPPER, landmark_positions
@@ -25,7 +25,7 @@ class PosedHumanoidAgent(Agent):
     """A humanoid on its support arm whose 47 joints are set from targets (no walking)."""
 
     def __init__(self, client: int, namespace: str, kind: AgentType, *, pose: Sequence[float]) -> None:
-        super().__init__(client, namespace, kind, _load(client, kind, namespace, None, pose, fixed=True))
+        super().__init__(client, namespace, kind, load_body(client, kind, namespace, None, pose, fixed=True))
         self.joint_indices = [self.joints[n] for n in JOINT_NAMES]
         self.targets = np.zeros(len(JOINT_NAMES))
         self.set_joints(self.targets)
