@@ -7,7 +7,6 @@ from pathlib import Path
 
 import polars as pl
 
-from simlan_data.evaluation import safety_sweep  # noqa: F401 - registers the report
 from simlan_data.evaluation.sweep import aggregate
 
 

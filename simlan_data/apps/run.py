@@ -29,7 +29,6 @@ from simlan_data.config.schema import Config, register_configs
 from simlan_data.config.validation import to_config
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from simlan_data.errors import ConfigError, RunError, SimlanError
-from simlan_data.evaluation import safety_sweep  # noqa: F401 - registers the collision sweep report
 from simlan_data.evaluation.localization_replay import recording_metrics
 from simlan_data.evaluation.replay import ReplayContext
 from simlan_data.evaluation.report import write_report

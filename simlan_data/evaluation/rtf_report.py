@@ -16,8 +16,6 @@ from pathlib import Path
 
 import polars as pl
 
-from simlan_data.evaluation.sweep import register_sweep_report
-
 # cameras -> real-time factor, SIMLAN (Gazebo, i9 + RTX 2070, empty world)
 SIMLAN_RTF: dict[str, dict[int, float]] = {
     "image only": {1: 0.99, 2: 0.56, 4: 0.34, 6: 0.23, 9: 0.17, 12: 0.07},
@@ -138,7 +136,6 @@ def plot(rows: pl.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-@register_sweep_report("rtf")
 def rtf_report(table: pl.DataFrame, sweep_dir: Path) -> None:
     """Write rtf_table.md and rtf.png into the sweep directory; print the table."""
     rows = rtf_rows(table)

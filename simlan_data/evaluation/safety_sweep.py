@@ -15,8 +15,6 @@ from pathlib import Path
 
 import polars as pl
 
-from simlan_data.evaluation.sweep import register_sweep_report
-
 REPORT_MD = "collision_sweep.md"
 REPORT_PNG = "collision_sweep.png"
 TYPES = {0: "head-on", 1: "pallet-truck side", 2: "Jackal side"}
@@ -158,7 +156,6 @@ def plot(cases: pl.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-@register_sweep_report("collision")
 def collision_report(table: pl.DataFrame, sweep_dir: Path) -> None:
     cases = collision_table(table)
     cases.write_csv(sweep_dir / "collision_cases.csv")

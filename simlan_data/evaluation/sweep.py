@@ -3,7 +3,7 @@
     python -m simlan_data.run -m KEY=A,B ...      # each job writes <sweep dir>/<n>/metrics.json
         -> on_multirun_end (any launcher: basic, joblib, ray; runs where the sweep was started)
         -> <sweep dir>/sweep_metrics.parquet + .csv   one row per job
-        -> the experiment's report (a registered function), if ``report`` names one
+        -> the experiment's report (``sweep_reports.SWEEP_REPORTS``), if ``report`` names one
 
 Columns: ``job`` (the sweep subdirectory), ``override.<key>`` for every command-line or sweeper
 override of the job (as Hydra recorded it in ``.hydra/overrides.yaml``), ``status`` (ok, or
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -32,24 +31,21 @@ from omegaconf import DictConfig
 
 from simlan_data.constants import METRICS_FILENAME
 from simlan_data.errors import ConfigError
+from simlan_data.evaluation.sweep_reports import SWEEP_REPORTS, SweepReport, register_sweep_report
+
+__all__ = [
+    "SWEEP_REPORTS",
+    "AggregateSweep",
+    "SweepReport",
+    "aggregate",
+    "collect_sweep",
+    "register_sweep_report",
+    "write_sweep_table",
+]
 
 log = logging.getLogger(__name__)
 
 SWEEP_TABLE_STEM = "sweep_metrics"
-
-# name -> function(table, sweep_dir) that writes the experiment's own tables and plots
-SweepReport = Callable[[pl.DataFrame, Path], None]
-SWEEP_REPORTS: dict[str, SweepReport] = {}
-
-
-def register_sweep_report(name: str) -> Callable[[SweepReport], SweepReport]:
-    """Register ``fn(table, sweep_dir)`` as the report an experiment can name."""
-
-    def wrap(fn: SweepReport) -> SweepReport:
-        SWEEP_REPORTS[name] = fn
-        return fn
-
-    return wrap
 
 
 def _overrides(job_dir: Path) -> dict[str, Any]:
@@ -119,8 +115,6 @@ def write_sweep_table(table: pl.DataFrame, sweep_dir: Path) -> tuple[Path, Path]
 def aggregate(sweep_dir: str | Path, report: str = "") -> pl.DataFrame:
     """Collect, write the table and run the named report; returns the table."""
     root = Path(sweep_dir)
-    from simlan_data.evaluation import sweep_reports  # noqa: F401 - registers the packaged reports (imports this module)
-
     if report and report not in SWEEP_REPORTS:
         raise ConfigError(
             f"unknown sweep report {report!r}",
