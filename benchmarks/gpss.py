@@ -79,7 +79,7 @@ def main() -> None:
                 f"scenario={scenario}",
                 f"cameras.width={w}",
                 f"cameras.height={h}",
-                f"localization.method={method}",
+                f"algorithms.localizer.method={method}",
                 f"hydra.run.dir={run_dir}",
                 "progress=false",
             )

@@ -23,7 +23,7 @@ def tiny_suite(tmp_path: Path) -> Path:
     doc = {
         "faults": {
             "bias": {
-                "run": ["localization.bias_m=[0.05,0.0]"],
+                "run": ["algorithms.localizer.bias_m=[0.05,0.0]"],
                 "replay": {"localization": {"bias_m": [0.05, 0.0]}},
             },
         },

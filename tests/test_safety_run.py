@@ -42,7 +42,7 @@ scenario: {{name: safety_test}}
 duration_s: 5.0
 world: {{fidelity: light, settle_s: 0.0}}
 cameras: {{ids: [162, 163], width: 480, height: 270}}
-localization: {{lost_timeout_s: 30.0}}
+algorithms: {{localizer: {{lost_timeout_s: 30.0}}}}
 safety:
   observability: {{timeout_s: 0.5}}
   zones:

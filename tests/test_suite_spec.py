@@ -34,7 +34,7 @@ def suite_doc(**case_changes: object) -> dict:
     return {
         "faults": {
             "bias": {
-                "run": ["localization.bias_m=[0.05,0.0]"],
+                "run": ["algorithms.localizer.bias_m=[0.05,0.0]"],
                 "replay": {"localization": {"bias_m": [0.05, 0.0]}},
             }
         },
@@ -87,7 +87,7 @@ def test_unmet_requirements_make_a_case_pending_not_failed(tmp_path: Path) -> No
     )
     assert case.pending.endswith("waiting for the a later issue")
     assert unmet("replay:localization") == ""
-    assert unmet("config:localization.bias_m") == ""
+    assert unmet("config:algorithms.localizer.bias_m") == ""
     assert unmet("conf:scenario/single_truck") == ""
     assert unmet("conf:scenario/nope") == "config file conf/scenario/nope.yaml"
 
@@ -183,8 +183,8 @@ def test_faults_act_only_on_the_cases_subject_to_them(tmp_path: Path) -> None:
     write_job_configs(suite, jobs, tmp_path / "conf", select_faults(suite, ["bias"]))
     register_configs()
     search = f"hydra.searchpath=[file://{tmp_path / 'conf'}]"
-    assert list(compose_config(search, "+vv_job=c__s0").localization.bias_m) == [0.05, 0.0]
-    assert list(compose_config(search, "+vv_job=d__s0").localization.bias_m) == [0.0, 0.0]
+    assert list(compose_config(search, "+vv_job=c__s0").algorithms.localizer.bias_m) == [0.05, 0.0]
+    assert list(compose_config(search, "+vv_job=d__s0").algorithms.localizer.bias_m) == [0.0, 0.0]
     doc["suites"]["s"]["cases"]["d"]["faults"] = ["bais"]
     with pytest.raises(ConfigError, match=r"unknown fault 'bais' in .*cases.d.faults: faults: bias"):
         load_suite(write(tmp_path, doc), "s")

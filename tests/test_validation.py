@@ -73,8 +73,8 @@ def test_reference_checks_registered_by_other_sections_run_with_the_config() -> 
         (["duration_s=60s"], "units are part of the key's name (duration_s: seconds): write duration_s=60"),
         (["recording.flush_period=2"], "did you mean recording.flush_period_s?"),
         (
-            ["localization.bias_m=[nan,0]"],
-            "invalid localization.bias_m[0]=nan in config: not a finite number",
+            ["algorithms.localizer.bias_m=[nan,0]"],
+            "invalid algorithms.localizer.bias_m[0]=nan in config: not a finite number",
         ),
         (["scenario=multi_robot", "agents=single_truck"], "unknown agent robot_agent_2 in config"),
         (["agents.robot_agent_1.pose=[-16,0.4,90]"], "(this looks like degrees)"),

@@ -37,6 +37,7 @@ from simlan_data.algorithms.markers import (
     marker_corners_in_marker_frame,
 )
 from simlan_data.constants import NS_PER_S
+from simlan_data.errors import ConfigError
 from simlan_data.geometry.camera import CameraModel, distort_points
 from simlan_data.geometry.rotations import wrap_angle
 from simlan_data.geometry.transforms import Transform
@@ -69,6 +70,24 @@ class LocalizerParams:
     )
     min_side_px: float = 8.0  # smaller detections are too noisy to use
     bias_m: tuple[float, float] = (0.0, 0.0)  # fault injection: added to every fix
+
+    def __post_init__(self) -> None:
+        key = "algorithms.localizer."
+        if self.method not in POSE_METHODS:
+            raise ConfigError.invalid(
+                key + "method", self.method, f"expected one of {', '.join(POSE_METHODS)}", f"set {key}method=ground"
+            )
+        if not self.unobserved_timeout_s > 0:
+            raise ConfigError.invalid(key + "unobserved_timeout_s", self.unobserved_timeout_s, "must be > 0", "use 0.5")
+        if self.lost_timeout_s < self.unobserved_timeout_s:
+            raise ConfigError.invalid(
+                key + "lost_timeout_s", self.lost_timeout_s, f"must be >= {key}unobserved_timeout_s", "use 1.5"
+            )
+        if not 0 <= self.processing_delay_s <= 5:
+            raise ConfigError.invalid(key + "processing_delay_s", self.processing_delay_s, "must be within 0..5 s", "use 0")
+        if len(self.bias_m) != 2:
+            raise ConfigError.invalid(key + "bias_m", list(self.bias_m), "expected [x_m, y_m]", "use [0.0, 0.0]")
+        object.__setattr__(self, "bias_m", (float(self.bias_m[0]), float(self.bias_m[1])))
 
 
 @dataclass(frozen=True)
@@ -429,7 +448,7 @@ class Localizer:
         if not plan:
             return []
         found = self.detect(camera_id, plan, jpeg=jpeg, gray=gray)
-        self.observe(t_ns, camera_id, plan, found)
+        self.observe_search(t_ns, camera_id, plan, found)
         return found.detections
 
     def detect(
@@ -498,7 +517,7 @@ class Localizer:
             detector = self._local.detector = MarkerDetector(marker_ids=self._detector.marker_ids)
         return detector
 
-    def observe(self, t_ns: int, camera_id: str, plan: str | list[Roi], found: ImageSearch) -> None:
+    def observe_search(self, t_ns: int, camera_id: str, plan: str | list[Roi], found: ImageSearch) -> None:
         """The state part of :meth:`process_image`: this image's marker poses into the frame
         set's observations.
 

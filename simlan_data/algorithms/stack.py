@@ -15,7 +15,9 @@ robots come from the localizer, people from the cameras' person detector.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -23,9 +25,10 @@ from numpy.typing import NDArray
 from shapely.geometry import MultiPolygon, Polygon
 from shapely.ops import unary_union
 
+from simlan_data.algorithms.aruco_localizer import ArucoLocalizer
 from simlan_data.algorithms.coordinator import Coordinator, Decision, Intent, footprint_polygon, swept_claim
 from simlan_data.algorithms.follower import FollowerParams, PursuitParams, WaypointFollower
-from simlan_data.algorithms.localization import ImageSearch, Localizer, LocalizerParams, PoseEstimate
+from simlan_data.algorithms.localization import ImageSearch, LocalizerParams, PoseEstimate
 from simlan_data.algorithms.markers import MarkerMount
 from simlan_data.algorithms.navigation import Navigator
 from simlan_data.algorithms.occupancy import OccupancyGrid
@@ -37,6 +40,7 @@ from simlan_data.algorithms.people import (
     fuse_people,
 )
 from simlan_data.algorithms.planner import GridPlanner
+from simlan_data.algorithms.roles import CameraFrame, LocalizerContext, searches
 from simlan_data.algorithms.safety import (
     FREE,
     STOP,
@@ -98,7 +102,7 @@ class GpssStack:
         grid: OccupancyGrid,
         *,
         nav: NavigationParams,
-        loc: LocalizerParams,
+        localizer: Callable[[LocalizerContext], Any] | None = None,
         source: str = "camera",
         safety: SafetyParams | None = None,
         people: PeopleParams | None = None,
@@ -116,7 +120,12 @@ class GpssStack:
             for a in agents
             if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"
         ]
-        self.localizer = Localizer(cameras, mounts, loc)
+        self.cameras = cameras
+        self.localized = [m.namespace for m in mounts]  # the robots the localizer must find
+        make = localizer or (lambda ctx: ArucoLocalizer(LocalizerParams(), ctx))
+        self.localizer = make(LocalizerContext(cameras, mounts))
+        self.searching = searches(self.localizer)  # the optional fast path (see roles)
+        self._frames: dict[str, CameraFrame] = {}
         self.coordinator = Coordinator(safety_distance_m=nav.safety_distance_m)
         # the last pose GPSS knew of every robot: its spawn pose until the cameras first see it
         self.last_known: dict[str, tuple[float, float, float]] = {a.namespace: a.pose for a in agents}
@@ -171,27 +180,23 @@ class GpssStack:
         self.last_people: list[tuple[float, float]] | None = None  # fused at the last camera tick
 
     # ------------------------------------------------------------------------------- cameras
-    def camera_frame(
-        self, t_ns: int, camera_id: str, *, jpeg: bytes | None = None, gray: NDArray[np.uint8] | None = None
-    ) -> str | None:
-        """Let the localizer search one image; returns "full"/"roi" if it did, None if it skipped."""
-        if self.source != "camera" or camera_id not in self.localizer.cameras:
-            return None  # a camera the localizer was not given (an injected fault)
-        plan = self.localizer.search_plan(t_ns, camera_id)
-        if not plan:
-            return None
-        self.localizer.process_image(t_ns, camera_id, jpeg=jpeg, gray=gray)
-        return "full" if plan == "full" else "roi"
-
     def search_plan(self, t_ns: int, camera_id: str) -> str | list | None:
         """Where the localizer will search this camera's image at ``t_ns`` (None: it will not)."""
-        if self.source != "camera" or camera_id not in self.localizer.cameras:
+        if self.source != "camera" or camera_id not in self.cameras or not self.searching:
             return None  # not a localizer camera (e.g. dropped by a fault): recorded, never searched
-        return self.localizer.search_plan(t_ns, camera_id) or None
+        return self.localizer.search_plans(t_ns, [camera_id])[0] or None
+
+    def wants_frames(self, camera_id: str) -> bool:
+        """True if the localizer takes this camera's frames whole (no searching protocol)."""
+        return self.source == "camera" and camera_id in self.cameras and not self.searching
+
+    def camera_image(self, frame: CameraFrame) -> None:
+        """Hand one camera's frame to a localizer without the searching protocol (camera order)."""
+        self._frames[frame.camera_id] = frame
 
     def camera_detections(self, t_ns: int, camera_id: str, plan: str | list, found: ImageSearch) -> str:
         """Take what :meth:`Localizer.detect` found in a planned image (in camera order)."""
-        self.localizer.observe(t_ns, camera_id, plan, found)
+        self.localizer.observe_search(t_ns, camera_id, plan, found)
         return "full" if plan == "full" else "roi"
 
     def people_frame(self, camera_id: str, labels: NDArray[np.uint8] | None) -> None:
@@ -200,8 +205,11 @@ class GpssStack:
             self._people_frame.extend(self.person_detector.detect(camera_id, labels))
 
     def close_camera_tick(self, t_ns: int) -> None:
-        if self.source == "camera":
+        if self.source == "camera" and self.searching:
             self.localizer.close_frame(t_ns)
+        elif self.source == "camera":
+            frames, self._frames = self._frames, {}
+            self.localizer.observe(t_ns, frames)
         if self.person_detector is not None:
             self.last_people = fuse_people(self._people_frame, self.people_params.cluster_m)
             self._people_frame = []

@@ -40,8 +40,6 @@ from simlan_data.sim.simulation import RunStats, Simulation
 
 log = logging.getLogger("simlan_data.run")
 
-register_configs()
-
 
 def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = True) -> dict[str, float]:
     """Check inputs, simulate and record into ``run_dir``; returns the metrics.
@@ -244,9 +242,14 @@ def _app(cfg: DictConfig) -> Any:
     return metrics.get("sim.rtf")
 
 
+def _registered_app() -> Any:
+    register_configs()  # the schema and every algorithm (plug-ins load here: their errors are one line)
+    return _app()
+
+
 def main() -> None:
     """The command line: the Hydra app, errors turned into one line and an exit code."""
-    run_cli(_app, started=lambda: bool(_STARTED))
+    run_cli(_registered_app, started=lambda: bool(_STARTED))
 
 
 cli = main

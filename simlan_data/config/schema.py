@@ -20,6 +20,7 @@ from simlan_data.algorithms.birdseye import CanvasSpec
 from simlan_data.algorithms.posemap.config import PosemapConfig
 from simlan_data.algorithms.safety import SafetyParams
 from simlan_data.config import collision as collision_scenario
+from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms
 from simlan_data.config.safety import CollisionScenarioConfig, SafetyConfig
 from simlan_data.errors import ConfigError
 
@@ -393,34 +394,14 @@ class AgentConfig:
 
 @dataclass
 class LocalizationConfig:
-    """Camera-based localization (GPSS)."""
+    """What the robots steer on; the localizer itself and its config: ``algorithms.localizer``."""
 
-    source: str = "camera"  # camera | ground_truth (robots steer on this)
-    method: str = "ground"  # ground (marker-plane ray intersection) | pnp (IPPE_SQUARE)
-    unobserved_timeout_s: float = 0.5
-    lost_timeout_s: float = 1.5
-    processing_delay_s: float = 0.0
-    bias_m: list[float] = field(default_factory=lambda: [0.0, 0.0])  # fault injection: added to every fix
+    source: str = "camera"  # camera (the localizer's estimates: GPSS) | ground_truth
 
     def __post_init__(self) -> None:
         if _incomplete(self):
             return
         _choice("localization.source", self.source, ("camera", "ground_truth"))
-        _choice("localization.method", self.method, ("ground", "pnp"))
-        _positive("localization.unobserved_timeout_s", self.unobserved_timeout_s, "use 0.5")
-        if self.lost_timeout_s < self.unobserved_timeout_s:
-            raise _bad(
-                "localization.lost_timeout_s",
-                self.lost_timeout_s,
-                "must be >= localization.unobserved_timeout_s",
-                "use 1.5",
-            )
-        if not 0 <= self.processing_delay_s <= 5:
-            raise _bad(
-                "localization.processing_delay_s", self.processing_delay_s, "must be within 0..5 s", "use 0"
-            )
-        if len(self.bias_m) != 2:
-            raise _bad("localization.bias_m", list(self.bias_m), "expected [x_m, y_m]", "use [0.0, 0.0]")
 
 
 @dataclass
@@ -481,8 +462,8 @@ class FaultsConfig:
     """Injected faults (V&V): what the GPSS algorithms receive or believe, never the simulated world.
 
     Rendering and the recording stay true (the cameras still see and record); the localizer is
-    given fewer images or a wrong calibration. ``localization.bias_m`` and
-    ``localization.processing_delay_s`` are the other injectable faults.
+    given fewer images or a wrong calibration. ``algorithms.localizer.bias_m`` and
+    ``algorithms.localizer.processing_delay_s`` are the other injectable faults.
     """
 
     drop_cameras: list[int] = field(default_factory=list)  # their images never reach the localizer
@@ -518,6 +499,7 @@ class Config:
     render: RenderConfig = field(default_factory=RenderConfig)
     recording: RecordingConfig = field(default_factory=RecordingConfig)
     localization: LocalizationConfig = field(default_factory=LocalizationConfig)
+    algorithms: AlgorithmsConfig = field(default_factory=AlgorithmsConfig)
     navigation: NavigationConfig = field(default_factory=NavigationConfig)
     agents: dict[str, AgentConfig] = field(default_factory=dict)
     birdseye: BirdseyeConfig = field(default_factory=BirdseyeConfig)
@@ -605,7 +587,7 @@ class Config:
         return self.safety.params(
             control_rate_hz=self.control_rate_hz,
             camera_rate_hz=self.cameras.rate_hz,
-            processing_delay_s=self.localization.processing_delay_s,
+            processing_delay_s=float(getattr(self.algorithms.localizer, "processing_delay_s", 0.0)),
             coordinated=self.navigation.coordination,
             known_namespaces=list(self.agents),
         )
@@ -623,9 +605,13 @@ def _collision_setup(key: str, *, _root_: DictConfig) -> Any:
     return collision_scenario.resolve(key, section)
 
 
-def register_configs() -> None:
-    """Register the schema with Hydra's ConfigStore (conf/config.yaml lists it first)."""
+def register_configs(overrides: list[str] | None = None) -> None:
+    """Register the schema and every algorithm with Hydra's ConfigStore (conf/config.yaml lists it first).
+
+    ``overrides`` (default: the command line) may select algorithms by import path.
+    """
     cs = ConfigStore.instance()
     cs.store(name="simlan_schema", node=Config)
+    register_algorithms(overrides)
     if not OmegaConf.has_resolver("collision_setup"):
         OmegaConf.register_new_resolver("collision_setup", _collision_setup)

@@ -5,9 +5,10 @@ rebuilt from the recorded camera info and static transforms, the same order of c
 the same algorithm and parameters it reproduces the live estimates exactly; with other parameters
 (``--set method=pnp``) it shows what they would have given.
 
-Options (``--set``): ``method``, ``unobserved_timeout_s``, ``lost_timeout_s``,
-``processing_delay_s``, ``bias_m`` (default: the recording's ``localization`` section) and the
-camera faults ``drop_cameras``, ``yaw_error_deg``, ``yaw_error_cameras`` (default: its ``faults``
+Options (``--set``): ``localizer`` (another algorithm: a registered name or ``module:Class``;
+default: the recording's ``algorithms.localizer``), any key of the localizer's config (e.g.
+``method``, ``lost_timeout_s``, ``bias_m`` for the built-in ``aruco``; default: the recording's
+values when the localizer is the recorded one, else its defaults) and the camera faults ``drop_cameras``, ``yaw_error_deg``, ``yaw_error_cameras`` (default: its ``faults``
 section); ``navigation=false`` skips the navigation metrics; ``reader`` is ``auto`` (default:
 a forked reading process when a core is free, else a reading thread; see :func:`choose_reader`),
 ``process`` (Linux) or ``thread``. Every reader gives the same results to the bit.
@@ -29,8 +30,10 @@ from typing import Any, TypeVar
 import numpy as np
 import polars as pl
 
-from simlan_data.algorithms.localization import ImageSearch, Localizer, LocalizerParams
+from simlan_data.algorithms import registry
+from simlan_data.algorithms.localization import ImageSearch
 from simlan_data.algorithms.markers import MarkerMount
+from simlan_data.algorithms.roles import CameraFrame, LocalizerContext, searches
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError, RecordingInputError
 from simlan_data.evaluation.camera_health import CameraConsistency
@@ -52,17 +55,29 @@ from simlan_data.world.agent_types import MARKER_SIZE_M, agent_type
 IMAGE_SUFFIX = "/image_raw/compressed"
 
 
-def localizer_params(config: dict[str, Any], overrides: dict[str, Any] | None = None) -> LocalizerParams:
-    """LocalizerParams from a run's ``localization`` config section (plus overrides)."""
-    loc = dict(config.get("localization") or {})
-    loc.update(overrides or {})
-    defaults = LocalizerParams()
-    return LocalizerParams(
-        method=str(loc.get("method", defaults.method)),
-        unobserved_timeout_s=float(loc.get("unobserved_timeout_s", defaults.unobserved_timeout_s)),
-        lost_timeout_s=float(loc.get("lost_timeout_s", defaults.lost_timeout_s)),
-        processing_delay_s=float(loc.get("processing_delay_s", defaults.processing_delay_s)),
-        bias_m=tuple(loc.get("bias_m", defaults.bias_m)),
+# replay options that are not the localizer's config: how to read, which metrics, injected faults
+REPLAY_OPTIONS = ("reader", "navigation", "localizer", "drop_cameras", "yaw_error_deg", "yaw_error_cameras")
+# recordings made before the ``algorithms`` section kept the built-in localizer's keys here
+LEGACY_SECTION = "localization"
+
+
+def selected_localizer(
+    config: dict[str, Any], options: dict[str, Any] | None = None
+) -> tuple[registry.AlgorithmSpec, Any]:
+    """The localizer and its config: the recording's, or ``options["localizer"]`` (a registered
+    name or module:Class) with the other options as its config values.
+
+    Raises:
+        ConfigError: an unknown name or key, a value its config rejects.
+    """
+    options = dict(options or {})
+    if "algorithms" not in config:  # an older recording: its localizer was the built-in one
+        legacy = {k: v for k, v in (config.get(LEGACY_SECTION) or {}).items() if k != "source"}
+        config = {**config, "algorithms": {"localizer": {"name": registry.DEFAULTS["localizer"], **legacy}}}
+    overrides = {k: v for k, v in options.items() if k not in REPLAY_OPTIONS}
+    name = options.get("localizer")
+    return registry.from_config(
+        config, "localizer", name=None if name is None else str(name), overrides=overrides, where="replay --set"
     )
 
 
@@ -319,13 +334,14 @@ def replay_localizer(
     reader: RecordingReader,
     config: dict[str, Any],
     cameras: dict,
-    params: LocalizerParams,
+    selected: tuple[registry.AlgorithmSpec, Any],
     consistency: CameraConsistency | None = None,
     *,
     reading: ReadingProcess | None = None,
     recorded: RecordedRows | None = None,
-) -> tuple[Localizer, dict[str, pl.DataFrame]]:
-    """Run the localizer over the recording; returns it and per-agent estimate tables.
+) -> tuple[Any, dict[str, pl.DataFrame]]:
+    """Run the ``selected`` localizer (spec, config) over the recording; returns it and per-agent
+    estimate tables.
 
     ``consistency`` (if given) gets every frame set's per-camera observations. ``reading``: the
     recording's frame sets from a reading process already started (for at least the cameras
@@ -335,7 +351,10 @@ def replay_localizer(
     mounts, _ = marker_mounts(config)
     camera_order = [str(c) for c in (config.get("cameras") or {}).get("ids", sorted(cameras))]
     camera_order = [c for c in camera_order if c in cameras]
-    localizer = Localizer({c: cameras[c] for c in camera_order}, mounts, params)
+    spec, loc_config = selected
+    context = LocalizerContext({c: cameras[c] for c in camera_order}, mounts)
+    localizer = registry.Guarded(spec.build(loc_config, context), spec)
+    searching = searches(localizer)
     control_ns = round(NS_PER_S / float(config.get("control_rate_hz", 20.0)))
     duration_ns = round(float(config.get("duration_s", reader.duration_ns / NS_PER_S)) * NS_PER_S)
     ticks = iter(range(0, duration_ns + 1, control_ns))
@@ -372,6 +391,10 @@ def replay_localizer(
         # and process_image do
         control_until(pending_t, inclusive=False)
         ids = [cid for cid in camera_order if cid in pending]
+        if not searching:  # the localizer takes the frames whole, as live
+            localizer.observe(pending_t, {c: CameraFrame(c, pending_t, bytes(pending[c])) for c in ids})
+            control_until(pending_t, inclusive=True)
+            return
         planned = list(zip(ids, localizer.search_plans(pending_t, ids)))
         jobs = [
             (cid, plan, pool.submit(localizer.detect, cid, plan, jpeg=pending[cid]))
@@ -386,9 +409,9 @@ def replay_localizer(
                 break
             own[cid] = localizer.detect(cid, plan, jpeg=pending[cid])
         for cid, plan, job in jobs:
-            localizer.observe(pending_t, cid, plan, own[cid] if cid in own else job.result())
+            localizer.observe_search(pending_t, cid, plan, own[cid] if cid in own else job.result())
         localizer.close_frame(pending_t)
-        if consistency is not None:
+        if consistency is not None and hasattr(localizer, "last_observations"):
             consistency.add(localizer.last_observations)
         control_until(pending_t, inclusive=True)
 
@@ -416,14 +439,7 @@ def replay_localizer(
 def localization(ctx: ReplayContext) -> dict[str, float]:
     """Recompute localization from the images; metrics against ground truth; estimates.parquet."""
     config = ctx.config
-    params = localizer_params(
-        config,
-        {
-            k: v
-            for k, v in ctx.options.items()
-            if k in ("method", "unobserved_timeout_s", "lost_timeout_s", "processing_delay_s", "bias_m")
-        },
-    )
+    selected = selected_localizer(config, ctx.options)
     read_in = str(ctx.options.get("reader", READERS[0]))
     if read_in not in READERS:
         raise ConfigError(
@@ -452,14 +468,14 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
         else contextlib.nullcontext()
     ) as reading:
         localizer, tables = replay_localizer(
-            ctx.reader, config, ctx.believed_cameras, params, consistency, reading=reading, recorded=recorded
+            ctx.reader, config, ctx.believed_cameras, selected, consistency, reading=reading, recorded=recorded
         )
     wall = time.perf_counter() - wall0
     # the recording's own topics (ground truth, live estimates, navigation): read on the way
     truth = recorded.truth_tables()
     visibility = {m.namespace: Visibility(ctx.cameras, kinds[m.namespace]) for m in mounts}
     metrics = localization_metrics(truth, tables, visibility)
-    frames = [t.seconds for t in localizer.timings]
+    frames = [t.seconds for t in getattr(localizer, "timings", [])]
     metrics.update(consistency.metrics("replay.localization."))
     metrics["replay.localization.wall_s"] = wall
     metrics["replay.localization.reading_process"] = float(in_process)  # (which reader auto took)
@@ -467,7 +483,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     if frames:
         metrics["replay.localization.frame_ms_median"] = float(np.median(frames) * 1e3)
         for mode in ("full", "roi"):
-            sel = [t.seconds for t in localizer.timings if t.mode == mode]
+            sel = [t.seconds for t in localizer.timings if t.mode == mode]  # (frames: it has timings)
             metrics[f"replay.localization.frames_{mode}"] = float(len(sel))
             if sel:
                 metrics[f"replay.localization.frame_ms_median_{mode}"] = float(np.median(sel) * 1e3)

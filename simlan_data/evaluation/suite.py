@@ -146,7 +146,7 @@ def check_jobs(jobs: list[Job], conf_dir: Path, overrides: list[str]) -> None:
     from simlan_data.config.schema import register_configs
     from simlan_data.config.validation import to_config
 
-    register_configs()
+    register_configs([*overrides, *(o for job in jobs for o in job.case.overrides)])
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         for job in jobs:
             where = f"case {job.case.name} (seed {job.seed})"

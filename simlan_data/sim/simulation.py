@@ -30,9 +30,12 @@ import cv2
 import numpy as np
 
 from simlan_data import __version__
-from simlan_data.algorithms.localization import ImageSearch, LocalizerParams
+from simlan_data.algorithms import registry
+from simlan_data.algorithms.localization import ImageSearch
 from simlan_data.algorithms.people import PeopleParams
+from simlan_data.algorithms.roles import CameraFrame, LocalizerContext
 from simlan_data.algorithms.stack import AgentPlan, GpssStack, NavigationParams
+from simlan_data.config.algorithms import plain
 from simlan_data.config.faults import CameraFaults
 from simlan_data.config.schema import Config
 from simlan_data.constants import FORMAT_VERSION, NS_PER_S
@@ -201,17 +204,18 @@ class Simulation:
                 nav.coordination,
                 nav.safety_distance_m,
             ),
-            loc=LocalizerParams(
-                method=loc.method,
-                unobserved_timeout_s=loc.unobserved_timeout_s,
-                lost_timeout_s=loc.lost_timeout_s,
-                processing_delay_s=loc.processing_delay_s,
-                bias_m=(float(loc.bias_m[0]), float(loc.bias_m[1])),
-            ),
+            localizer=self._localizer_factory(),
             source=loc.source,
             safety=cfg.safety_params(),
             people=PeopleParams.from_dict(asdict(cfg.safety.people)),
         )
+
+    def _localizer_factory(self) -> Callable[[LocalizerContext], Any]:
+        """Build the selected localizer from its own config, as the replay does (guarded)."""
+        selected = self.cfg.algorithms.localizer
+        spec = registry.resolve("localizer", selected.name)
+        config = spec.make_config(plain(selected), where="config algorithms.localizer")
+        return lambda ctx: registry.Guarded(spec.build(config, ctx), spec)
 
     def _search(
         self,
@@ -242,6 +246,16 @@ class Simulation:
         done: Future[ImageSearch] = Future()
         done.set_result(search())
         return done
+
+    def _frame(self, t_ns: int, camera_id: str, images: CameraImages, encoded: Any) -> CameraFrame:
+        """A camera's frame as the bag holds it (the JPEG the recorder wrote), for a localizer
+        without the searching protocol; the replay hands it the same bytes."""
+        rgb = encoded.result() if encoded is not None else None
+        if rgb is not None and rgb.format == "jpeg":
+            return CameraFrame(camera_id, t_ns, bytes(rgb.data))
+        quality = [cv2.IMWRITE_JPEG_QUALITY, self.cfg.recording.jpeg_quality]
+        _ok, data = cv2.imencode(".jpg", cv2.cvtColor(np.asarray(images.rgb), cv2.COLOR_RGB2BGR), quality)
+        return CameraFrame(camera_id, t_ns, data.tobytes())
 
     # --------------------------------------------------------------------------- the loop
     def _loop(
@@ -283,6 +297,7 @@ class Simulation:
                 scene.refresh_static_layers()
                 moved = scene.moved_boxes()
                 frames = []
+                encoded_of: dict[str, Any] = {}
                 for renderer in scene.renderers:
                     camera = renderer.camera
                     images = renderer.render(moved)
@@ -294,6 +309,7 @@ class Simulation:
                         None if plan is None else self._search(stack, writer, camera, plan, images, encoded)
                     )
                     frames.append((camera, images, plan, search))
+                    encoded_of[camera.camera_id] = encoded
                 if birdseye is not None:
                     birdseye.tick(t, step // self.camera_every, [f[1] for f in frames])
                 if driver is not None:
@@ -305,6 +321,8 @@ class Simulation:
                         found = search.result()
                         mode = stack.camera_detections(t, camera.camera_id, plan, found)
                         pub.detections(t, camera, found.detections, mode)
+                    elif stack.wants_frames(camera.camera_id):
+                        stack.camera_image(self._frame(t, camera.camera_id, images, encoded_of[camera.camera_id]))
                     stack.people_frame(camera.camera_id, images.labels)
                 stack.close_camera_tick(t)
                 if stack.last_people is not None:
@@ -330,7 +348,7 @@ class Simulation:
                 n_events = len(stack.safety.events)
                 out = stack.control(t, dt_control, truth, contacts)
                 if stack.source == "camera":
-                    pub.estimates(t, out.estimates, stack.localizer.namespaces)
+                    pub.estimates(t, out.estimates, stack.localized)
                 pub.safety(t, stack.safety, stack.safety.events[n_events:])
                 for agent in scene.agents:
                     ns = agent.namespace
