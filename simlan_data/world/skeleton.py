@@ -101,20 +101,35 @@ def _side(name: str, sign: float) -> str:
     return name.replace("Side", "Right" if sign < 0 else "Left")
 
 
-def _build() -> tuple[tuple[Joint, ...], tuple[Link, ...]]:
-    J: list[Joint] = []
-    L: list[Link] = []
+class _Body:
+    """The joints and links of the body in the order they are declared (the URDF's order)."""
+
+    def __init__(self) -> None:
+        self.joints: list[Joint] = []
+        self.links: list[Link] = []
 
     def rev(
-        name: str, parent: str, child: str, xyz: tuple[float, float, float], axis: str, lo: float, hi: float
+        self,
+        name: str,
+        parent: str,
+        child: str,
+        xyz: tuple[float, float, float],
+        axis: str,
+        lo: float,
+        hi: float,
     ) -> None:
+        """Add a revolute joint about the parent's x, y or z axis."""
         vec = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}[axis]
-        J.append(Joint(name, parent, child, xyz, vec, lo, hi))
+        self.joints.append(Joint(name, parent, child, xyz, vec, lo, hi))
 
-    def frame(name: str) -> None:  # a massless frame between two joints of one anatomical joint
-        L.append(Link(name, "", ()))
+    def frame(self, name: str) -> None:
+        """Add a massless frame between two joints of one anatomical joint."""
+        self.links.append(Link(name, "", ()))
 
-    # --- support arm: SIMLAN's three joints (x, y, z, +-pi/2), pivot just behind the pelvis ---------
+
+def _support_arm(b: _Body) -> None:
+    """Add SIMLAN's three-joint support arm (x, y, z, +-pi/2), its pivot just behind the pelvis."""
+    J, L, rev = b.joints, b.links, b.rev
     L.append(Link("base_link", "metal", (Visual("box", (0.3, 0.3, 0.02), (0.0, 0.0, 0.01)),)))
     L.append(Link("link1", "metal", (Visual("cylinder", (0.025, 1.3), (0.0, 0.0, 0.65)),)))
     J.append(Joint("base_link1_joint", "base_link", "link1", (0.0, 0.0, 0.02)))
@@ -135,7 +150,10 @@ def _build() -> tuple[tuple[Joint, ...], tuple[Link, ...]]:
     rev("link3_link4_joint", "link3", "link4", (0.0, 0.0, 0.05), "z", -HALF_PI, HALF_PI)
     J.append(Joint("arm_human_joint", "link4", "Pelvis", (0.2, 0.0, 0.1)))
 
-    # --- trunk --------------------------------------------------------------------------------
+
+def _trunk(b: _Body) -> None:
+    """Add the pelvis, abdomen, chest, neck and head (hair and eyes as links of their own)."""
+    J, L, rev, frame = b.joints, b.links, b.rev, b.frame
     L.append(Link("Pelvis", "trousers", (Visual("box", (0.18, 0.31, 0.16), (0.0, 0.0, 0.03)),)))
     frame("L5_f1")
     rev("jL5S1_rotx", "Pelvis", "L5_f1", (-0.000206, 0.0, 0.098478), "x", -0.610865, 0.610865)
@@ -173,155 +191,164 @@ def _build() -> tuple[tuple[Joint, ...], tuple[Link, ...]]:
     )
     J.append(Joint("jEyes", "Head", "Eyes", (0.0, 0.0, 0.0)))
 
-    # --- arms (right: -y, left: +y) ------------------------------------------------------------
-    for s in (-1.0, 1.0):
-        side = "Right" if s < 0 else "Left"
-        # SIMLAN's names: jC7RightShoulder_rotx (human-gazebo: jRightC7Shoulder_rotx)
-        lo, hi = (-0.785398, 0.0872665) if s < 0 else (-0.0872665, 0.785398)
-        rev(f"jC7{side}Shoulder_rotx", "T8", f"{side}Shoulder", (0.0, s * 0.026313, 0.067052), "x", lo, hi)
-        L.append(
-            Link(
-                f"{side}Shoulder",
-                "shirt",
-                (Visual("cylinder", (0.05, 0.13), (0.0, s * 0.065, 0.0), _ALONG_Y),),
-            )
-        )
-        frame(f"{side}UpperArm_f1")
-        frame(f"{side}UpperArm_f2")
-        lo, hi = (-2.35619, 1.5708) if s < 0 else (-1.5708, 2.35619)
-        rev(
-            f"j{side}Shoulder_rotx",
-            f"{side}Shoulder",
-            f"{side}UpperArm_f1",
-            (0.0, s * 0.13047, 0.0),
-            "x",
-            lo,
-            hi,
-        )
-        rev(
-            f"j{side}Shoulder_roty",
-            f"{side}UpperArm_f1",
-            f"{side}UpperArm_f2",
-            (0.0, 0.0, 0.0),
-            "y",
-            -1.5708,
-            1.5708,
-        )
-        lo, hi = (-0.785398, 3.14159) if s < 0 else (-3.14159, 0.785398)
-        rev(f"j{side}Shoulder_rotz", f"{side}UpperArm_f2", f"{side}UpperArm", (0.0, 0.0, 0.0), "z", lo, hi)
-        L.append(
-            Link(
-                f"{side}UpperArm",
-                "shirt",
-                (Visual("cylinder", (0.045, 0.27), (0.0, s * 0.135, 0.0), _ALONG_Y),),
-            )
-        )
-        frame(f"{side}ForeArm_f1")
-        rev(
-            f"j{side}Elbow_roty",
-            f"{side}UpperArm",
-            f"{side}ForeArm_f1",
-            (0.0, s * 0.26994, 0.0),
-            "y",
-            -1.5708,
-            1.48353,
-        )
-        lo, hi = (0.0, 2.53073) if s < 0 else (-2.53073, 0.0)
-        rev(f"j{side}Elbow_rotz", f"{side}ForeArm_f1", f"{side}ForeArm", (0.0, 0.0, 0.0), "z", lo, hi)
-        L.append(
-            Link(
-                f"{side}ForeArm",
-                "skin",
-                (Visual("cylinder", (0.034, 0.222), (0.0, s * 0.111, 0.0), _ALONG_Y),),
-            )
-        )
-        frame(f"{side}Hand_f1")
-        lo, hi = (-0.872665, 1.0472) if s < 0 else (-1.0472, 0.872665)
-        rev(
-            f"j{side}Wrist_rotx", f"{side}ForeArm", f"{side}Hand_f1", (7.7e-05, s * 0.22247, 0.0), "x", lo, hi
-        )
-        lo, hi = (-0.523599, 0.349066) if s < 0 else (-0.349066, 0.523599)
-        rev(f"j{side}Wrist_rotz", f"{side}Hand_f1", f"{side}Hand", (0.0, 0.0, 0.0), "z", lo, hi)
-        L.append(Link(f"{side}Hand", "skin", (Visual("box", (0.095, 0.17, 0.035), (0.0, s * 0.085, 0.0)),)))
 
-    # --- legs ----------------------------------------------------------------------------------
+def _arm(b: _Body, s: float) -> None:
+    """Add one arm, shoulder to hand: the right one for ``s = -1`` (-y), the left one for ``s = 1``."""
+    L, rev, frame = b.links, b.rev, b.frame
+    side = "Right" if s < 0 else "Left"
+    # SIMLAN's names: jC7RightShoulder_rotx (human-gazebo: jRightC7Shoulder_rotx)
+    lo, hi = (-0.785398, 0.0872665) if s < 0 else (-0.0872665, 0.785398)
+    rev(f"jC7{side}Shoulder_rotx", "T8", f"{side}Shoulder", (0.0, s * 0.026313, 0.067052), "x", lo, hi)
+    L.append(
+        Link(
+            f"{side}Shoulder",
+            "shirt",
+            (Visual("cylinder", (0.05, 0.13), (0.0, s * 0.065, 0.0), _ALONG_Y),),
+        )
+    )
+    frame(f"{side}UpperArm_f1")
+    frame(f"{side}UpperArm_f2")
+    lo, hi = (-2.35619, 1.5708) if s < 0 else (-1.5708, 2.35619)
+    rev(
+        f"j{side}Shoulder_rotx",
+        f"{side}Shoulder",
+        f"{side}UpperArm_f1",
+        (0.0, s * 0.13047, 0.0),
+        "x",
+        lo,
+        hi,
+    )
+    rev(
+        f"j{side}Shoulder_roty",
+        f"{side}UpperArm_f1",
+        f"{side}UpperArm_f2",
+        (0.0, 0.0, 0.0),
+        "y",
+        -1.5708,
+        1.5708,
+    )
+    lo, hi = (-0.785398, 3.14159) if s < 0 else (-3.14159, 0.785398)
+    rev(f"j{side}Shoulder_rotz", f"{side}UpperArm_f2", f"{side}UpperArm", (0.0, 0.0, 0.0), "z", lo, hi)
+    L.append(
+        Link(
+            f"{side}UpperArm",
+            "shirt",
+            (Visual("cylinder", (0.045, 0.27), (0.0, s * 0.135, 0.0), _ALONG_Y),),
+        )
+    )
+    frame(f"{side}ForeArm_f1")
+    rev(
+        f"j{side}Elbow_roty",
+        f"{side}UpperArm",
+        f"{side}ForeArm_f1",
+        (0.0, s * 0.26994, 0.0),
+        "y",
+        -1.5708,
+        1.48353,
+    )
+    lo, hi = (0.0, 2.53073) if s < 0 else (-2.53073, 0.0)
+    rev(f"j{side}Elbow_rotz", f"{side}ForeArm_f1", f"{side}ForeArm", (0.0, 0.0, 0.0), "z", lo, hi)
+    L.append(
+        Link(
+            f"{side}ForeArm",
+            "skin",
+            (Visual("cylinder", (0.034, 0.222), (0.0, s * 0.111, 0.0), _ALONG_Y),),
+        )
+    )
+    frame(f"{side}Hand_f1")
+    lo, hi = (-0.872665, 1.0472) if s < 0 else (-1.0472, 0.872665)
+    rev(f"j{side}Wrist_rotx", f"{side}ForeArm", f"{side}Hand_f1", (7.7e-05, s * 0.22247, 0.0), "x", lo, hi)
+    lo, hi = (-0.523599, 0.349066) if s < 0 else (-0.349066, 0.523599)
+    rev(f"j{side}Wrist_rotz", f"{side}Hand_f1", f"{side}Hand", (0.0, 0.0, 0.0), "z", lo, hi)
+    L.append(Link(f"{side}Hand", "skin", (Visual("box", (0.095, 0.17, 0.035), (0.0, s * 0.085, 0.0)),)))
+
+
+def _leg(b: _Body, s: float) -> None:
+    """Add one leg, hip to toe: the right one for ``s = -1`` (-y), the left one for ``s = 1``."""
+    L, rev, frame = b.links, b.rev, b.frame
+    side = "Right" if s < 0 else "Left"
+    frame(f"{side}UpperLeg_f1")
+    frame(f"{side}UpperLeg_f2")
+    lo, hi = (-0.785398, 0.523599) if s < 0 else (-0.523599, 0.785398)
+    rev(
+        f"j{side}Hip_rotx",
+        "Pelvis",
+        f"{side}UpperLeg_f1",
+        (0.000103, s * 0.081614, 0.001009),
+        "x",
+        lo,
+        hi,
+    )
+    rev(
+        f"j{side}Hip_roty",
+        f"{side}UpperLeg_f1",
+        f"{side}UpperLeg_f2",
+        (0.0, 0.0, 0.0),
+        "y",
+        -2.0944,
+        0.261799,
+    )
+    rev(
+        f"j{side}Hip_rotz",
+        f"{side}UpperLeg_f2",
+        f"{side}UpperLeg",
+        (0.0, 0.0, 0.0),
+        "z",
+        -0.785398,
+        0.785398,
+    )
+    L.append(Link(f"{side}UpperLeg", "trousers", (Visual("cylinder", (0.07, 0.449), (0.0, 0.0, -0.2245)),)))
+    frame(f"{side}LowerLeg_f1")
+    rev(
+        f"j{side}Knee_roty",
+        f"{side}UpperLeg",
+        f"{side}LowerLeg_f1",
+        (3.6e-05, 0.0, -0.44898),
+        "y",
+        0.0,
+        2.35619,
+    )
+    lo, hi = (-0.698132, 0.523599) if s < 0 else (-0.523599, 0.698132)
+    rev(f"j{side}Knee_rotz", f"{side}LowerLeg_f1", f"{side}LowerLeg", (0.0, 0.0, 0.0), "z", lo, hi)
+    L.append(Link(f"{side}LowerLeg", "trousers", (Visual("cylinder", (0.05, 0.406), (0.0, 0.0, -0.203)),)))
+    frame(f"{side}Foot_f1")
+    frame(f"{side}Foot_f2")
+    lo, hi = (-0.610865, 0.785398) if s < 0 else (-0.785398, 0.610865)
+    rev(f"j{side}Ankle_rotx", f"{side}LowerLeg", f"{side}Foot_f1", (0.000205, 0.0, -0.40608), "x", lo, hi)
+    rev(
+        f"j{side}Ankle_roty",
+        f"{side}Foot_f1",
+        f"{side}Foot_f2",
+        (0.0, 0.0, 0.0),
+        "y",
+        -0.523599,
+        0.872665,
+    )
+    lo, hi = (-0.436332, 0.872665) if s < 0 else (-0.872665, 0.436332)
+    rev(f"j{side}Ankle_rotz", f"{side}Foot_f2", f"{side}Foot", (0.0, 0.0, 0.0), "z", lo, hi)
+    L.append(Link(f"{side}Foot", "shoes", (Visual("box", (0.19, 0.09, 0.08), (0.05, 0.0, -0.04)),)))
+    rev(
+        f"j{side}BallFoot_roty",
+        f"{side}Foot",
+        f"{side}Toe",
+        (0.14456, 0.0, -0.064752),
+        "y",
+        -0.174533,
+        1.5708,
+    )
+    L.append(Link(f"{side}Toe", "shoes", (Visual("box", (0.07, 0.09, 0.03), (0.03, 0.0, 0.0)),)))
+
+
+def _build() -> tuple[tuple[Joint, ...], tuple[Link, ...]]:
+    """Declare the whole body: support arm, trunk, both arms, both legs, in the URDF's order."""
+    b = _Body()
+    _support_arm(b)
+    _trunk(b)
     for s in (-1.0, 1.0):
-        side = "Right" if s < 0 else "Left"
-        frame(f"{side}UpperLeg_f1")
-        frame(f"{side}UpperLeg_f2")
-        lo, hi = (-0.785398, 0.523599) if s < 0 else (-0.523599, 0.785398)
-        rev(
-            f"j{side}Hip_rotx",
-            "Pelvis",
-            f"{side}UpperLeg_f1",
-            (0.000103, s * 0.081614, 0.001009),
-            "x",
-            lo,
-            hi,
-        )
-        rev(
-            f"j{side}Hip_roty",
-            f"{side}UpperLeg_f1",
-            f"{side}UpperLeg_f2",
-            (0.0, 0.0, 0.0),
-            "y",
-            -2.0944,
-            0.261799,
-        )
-        rev(
-            f"j{side}Hip_rotz",
-            f"{side}UpperLeg_f2",
-            f"{side}UpperLeg",
-            (0.0, 0.0, 0.0),
-            "z",
-            -0.785398,
-            0.785398,
-        )
-        L.append(
-            Link(f"{side}UpperLeg", "trousers", (Visual("cylinder", (0.07, 0.449), (0.0, 0.0, -0.2245)),))
-        )
-        frame(f"{side}LowerLeg_f1")
-        rev(
-            f"j{side}Knee_roty",
-            f"{side}UpperLeg",
-            f"{side}LowerLeg_f1",
-            (3.6e-05, 0.0, -0.44898),
-            "y",
-            0.0,
-            2.35619,
-        )
-        lo, hi = (-0.698132, 0.523599) if s < 0 else (-0.523599, 0.698132)
-        rev(f"j{side}Knee_rotz", f"{side}LowerLeg_f1", f"{side}LowerLeg", (0.0, 0.0, 0.0), "z", lo, hi)
-        L.append(
-            Link(f"{side}LowerLeg", "trousers", (Visual("cylinder", (0.05, 0.406), (0.0, 0.0, -0.203)),))
-        )
-        frame(f"{side}Foot_f1")
-        frame(f"{side}Foot_f2")
-        lo, hi = (-0.610865, 0.785398) if s < 0 else (-0.785398, 0.610865)
-        rev(f"j{side}Ankle_rotx", f"{side}LowerLeg", f"{side}Foot_f1", (0.000205, 0.0, -0.40608), "x", lo, hi)
-        rev(
-            f"j{side}Ankle_roty",
-            f"{side}Foot_f1",
-            f"{side}Foot_f2",
-            (0.0, 0.0, 0.0),
-            "y",
-            -0.523599,
-            0.872665,
-        )
-        lo, hi = (-0.436332, 0.872665) if s < 0 else (-0.872665, 0.436332)
-        rev(f"j{side}Ankle_rotz", f"{side}Foot_f2", f"{side}Foot", (0.0, 0.0, 0.0), "z", lo, hi)
-        L.append(Link(f"{side}Foot", "shoes", (Visual("box", (0.19, 0.09, 0.08), (0.05, 0.0, -0.04)),)))
-        rev(
-            f"j{side}BallFoot_roty",
-            f"{side}Foot",
-            f"{side}Toe",
-            (0.14456, 0.0, -0.064752),
-            "y",
-            -0.174533,
-            1.5708,
-        )
-        L.append(Link(f"{side}Toe", "shoes", (Visual("box", (0.07, 0.09, 0.03), (0.03, 0.0, 0.0)),)))
-    return tuple(J), tuple(L)
+        _arm(b, s)
+    for s in (-1.0, 1.0):
+        _leg(b, s)
+    return tuple(b.joints), tuple(b.links)
 
 
 JOINTS_ALL, LINKS = _build()
