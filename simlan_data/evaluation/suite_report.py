@@ -188,97 +188,75 @@ def _estimates(
     return estimates_from_recording(reader, namespaces)
 
 
-def plot_trajectories(path: Path, case: Case, jobs: list[Job], out: Path) -> tuple[Path | None, Path | None]:
-    """Ground truth and estimates over the floor plan, and the xy error over time, for every seed."""
+def _draw_floor_plan(ax: Any, config: dict[str, Any], cameras: dict[str, Any]) -> None:
+    """Draw the occupancy grid of the run's layout and the cameras (^) under the trajectories."""
     from simlan_data.algorithms.occupancy import grid_from_world
-    from simlan_data.evaluation.replay import ReplayContext
     from simlan_data.world.layout import load_layout
 
-    fig, ax = plt.subplots(figsize=(11, 5.5))
-    fig_e, ax_e = plt.subplots(figsize=(11, 3.2))
-    extent_pts: list[np.ndarray] = []
-    colours = plt.get_cmap("tab10")
-    drawn_map = False
-    for k, job in enumerate(jobs):
-        bag = job.run_dir / RECORDING_DIRNAME
-        if job.error or not bag.is_dir():
-            continue
-        with RecordingReader(bag) as reader:
-            ctx = ReplayContext(reader, out)
-            config = ctx.config
-            truth = ground_truth(reader)
-            agents = config.get("agents") or {}
-            namespaces = [ns for ns in agents if ns in truth]
-            est = _estimates(job, out, reader, namespaces)
-            if not drawn_map:
-                world = config.get("world") or {}
-                grid = grid_from_world(
-                    load_layout(
-                        world.get("layout", "warehouse_layout.csv"), world.get("fidelity", "default")
-                    ),
-                    resolution_m=0.1,
-                )
-                x0, y0 = grid.origin_xy_m
-                h, w = grid.shape
-                ax.imshow(
-                    grid.occupied,
-                    origin="lower",
-                    cmap="Greys",
-                    alpha=0.45,
-                    extent=(x0, x0 + w * 0.1, y0, y0 + h * 0.1),
-                )
-                for cid, cam in ctx.cameras.items():
-                    ax.plot(*cam.position[:2], marker="^", color="tab:purple", ms=5)
-                    ax.annotate(
-                        cid, (float(cam.position[0]), float(cam.position[1])), fontsize=6, color="tab:purple"
-                    )
-                drawn_map = True
-        for i, ns in enumerate(namespaces):
-            colour = colours(i % 10)
-            gt = truth[ns]
-            xy = gt.select("x", "y").to_numpy()
-            extent_pts.append(xy)
-            ax.plot(
-                xy[:, 0],
-                xy[:, 1],
-                color=colour,
-                lw=1.2,
-                alpha=0.9 if k == 0 else 0.35,
-                label=f"{ns} truth" if k == 0 else None,
-            )
-            goals = np.asarray((agents[ns] or {}).get("goals") or [], dtype=float).reshape(-1, 2)
-            if k == 0 and len(goals):
-                ax.scatter(goals[:, 0], goals[:, 1], marker="x", color=colour, s=40, zorder=4)
-            e = est.get(ns)
-            if e is None or e.height == 0:
-                continue
-            e = e.filter(pl.col("x").is_not_null())
-            ax.scatter(
-                e["x"].to_numpy(),
-                e["y"].to_numpy(),
-                s=1.5,
-                color=colour,
-                alpha=0.6 if k == 0 else 0.2,
-                label=f"{ns} estimate" if k == 0 else None,
-            )
-            joined = e.join(gt.rename({"x": "gx", "y": "gy", "yaw": "gyaw"}), on="stamp_ns", how="inner")
-            if joined.height:
-                err = np.hypot(
-                    (joined["x"] - joined["gx"]).to_numpy(), (joined["y"] - joined["gy"]).to_numpy()
-                )
-                ax_e.plot(
-                    joined["stamp_ns"].to_numpy() / 1e9,
-                    err * 100,
-                    color=colour,
-                    lw=0.8,
-                    alpha=0.9 if k == 0 else 0.35,
-                    label=f"{ns}" if k == 0 else None,
-                )
-    if not extent_pts:
-        plt.close(fig)
-        plt.close(fig_e)
-        return None, None
-    pts = np.vstack(extent_pts)
+    world = config.get("world") or {}
+    grid = grid_from_world(
+        load_layout(world.get("layout", "warehouse_layout.csv"), world.get("fidelity", "default")),
+        resolution_m=0.1,
+    )
+    x0, y0 = grid.origin_xy_m
+    h, w = grid.shape
+    ax.imshow(
+        grid.occupied,
+        origin="lower",
+        cmap="Greys",
+        alpha=0.45,
+        extent=(x0, x0 + w * 0.1, y0, y0 + h * 0.1),
+    )
+    for cid, cam in cameras.items():
+        ax.plot(*cam.position[:2], marker="^", color="tab:purple", ms=5)
+        ax.annotate(cid, (float(cam.position[0]), float(cam.position[1])), fontsize=6, color="tab:purple")
+
+
+def _draw_agent(
+    ax: Any, ax_e: Any, k: int, ns: str, colour: Any, gt: pl.DataFrame, agent: dict[str, Any], e: Any
+) -> np.ndarray:
+    """Draw one agent of seed ``k``: truth, goals (seed 0), estimates and the xy error; return the truth's xy."""
+    xy = gt.select("x", "y").to_numpy()
+    ax.plot(
+        xy[:, 0],
+        xy[:, 1],
+        color=colour,
+        lw=1.2,
+        alpha=0.9 if k == 0 else 0.35,
+        label=f"{ns} truth" if k == 0 else None,
+    )
+    goals = np.asarray(agent.get("goals") or [], dtype=float).reshape(-1, 2)
+    if k == 0 and len(goals):
+        ax.scatter(goals[:, 0], goals[:, 1], marker="x", color=colour, s=40, zorder=4)
+    if e is None or e.height == 0:
+        return xy
+    e = e.filter(pl.col("x").is_not_null())
+    ax.scatter(
+        e["x"].to_numpy(),
+        e["y"].to_numpy(),
+        s=1.5,
+        color=colour,
+        alpha=0.6 if k == 0 else 0.2,
+        label=f"{ns} estimate" if k == 0 else None,
+    )
+    joined = e.join(gt.rename({"x": "gx", "y": "gy", "yaw": "gyaw"}), on="stamp_ns", how="inner")
+    if joined.height:
+        err = np.hypot((joined["x"] - joined["gx"]).to_numpy(), (joined["y"] - joined["gy"]).to_numpy())
+        ax_e.plot(
+            joined["stamp_ns"].to_numpy() / 1e9,
+            err * 100,
+            color=colour,
+            lw=0.8,
+            alpha=0.9 if k == 0 else 0.35,
+            label=f"{ns}" if k == 0 else None,
+        )
+    return xy
+
+
+def _save_trajectory_plots(
+    path: Path, case: Case, fig: Any, ax: Any, fig_e: Any, ax_e: Any, pts: np.ndarray
+) -> tuple[Path, Path | None]:
+    """Frame the floor plan around the trajectories, label both figures and write them."""
     ax.set_xlim(pts[:, 0].min() - 4, pts[:, 0].max() + 4)
     ax.set_ylim(pts[:, 1].min() - 4, pts[:, 1].max() + 4)
     ax.set_aspect("equal")
@@ -302,6 +280,39 @@ def plot_trajectories(path: Path, case: Case, jobs: list[Job], out: Path) -> tup
     fig_e.savefig(err_path, dpi=90)
     plt.close(fig_e)
     return path, err_path if ax_e.lines else None
+
+
+def plot_trajectories(path: Path, case: Case, jobs: list[Job], out: Path) -> tuple[Path | None, Path | None]:
+    """Ground truth and estimates over the floor plan, and the xy error over time, for every seed."""
+    from simlan_data.evaluation.replay import ReplayContext
+
+    fig, ax = plt.subplots(figsize=(11, 5.5))
+    fig_e, ax_e = plt.subplots(figsize=(11, 3.2))
+    extent_pts: list[np.ndarray] = []
+    colours = plt.get_cmap("tab10")
+    drawn_map = False
+    for k, job in enumerate(jobs):
+        bag = job.run_dir / RECORDING_DIRNAME
+        if job.error or not bag.is_dir():
+            continue
+        with RecordingReader(bag) as reader:
+            ctx = ReplayContext(reader, out)
+            config = ctx.config
+            truth = ground_truth(reader)
+            agents = config.get("agents") or {}
+            namespaces = [ns for ns in agents if ns in truth]
+            est = _estimates(job, out, reader, namespaces)
+            if not drawn_map:
+                _draw_floor_plan(ax, config, ctx.cameras)
+                drawn_map = True
+        for i, ns in enumerate(namespaces):
+            xy = _draw_agent(ax, ax_e, k, ns, colours(i % 10), truth[ns], agents[ns] or {}, est.get(ns))
+            extent_pts.append(xy)
+    if not extent_pts:
+        plt.close(fig)
+        plt.close(fig_e)
+        return None, None
+    return _save_trajectory_plots(path, case, fig, ax, fig_e, ax_e, np.vstack(extent_pts))
 
 
 def copy_birdseye(path: Path, jobs: list[Job], out: Path) -> Path | None:
@@ -402,20 +413,14 @@ def plot_grid(path: Path, family: str, cases: list[Case], summary: pl.DataFrame)
 
 
 # ----------------------------------------------------------------------------------- report
-def write_report(
-    out: Path,
+def _header_lines(
     suite: Suite,
-    cases: list[Case],
-    jobs: list[Job],
-    metrics: pl.DataFrame,
     summary: pl.DataFrame,
-    *,
     faults: list[Fault],
     timings: dict[str, float],
     reused: Path | None,
-) -> Path:
-    plots = out / PLOTS_DIR
-    plots.mkdir(exist_ok=True)
+) -> list[str]:
+    """Write the verdict, the run's facts (recordings, faults, overrides, wall times) and how bounds are read."""
     c = counts(summary)
     failed = sum(c.get(v, 0) for v in FAILING)
     lines = [
@@ -436,6 +441,13 @@ def write_report(
         "A bound holds when the whole interval of the mean lies within it; a regression is a change for "
         "the worse beyond the tolerance that the interval of the difference to the baseline shows "
         "(paired over seeds). Tables: `summary.parquet|csv` (checks), `metrics.parquet|csv` (every metric).",
+    ]
+    return lines
+
+
+def _checks_lines(summary: pl.DataFrame) -> list[str]:
+    """Write the table of checks (failures marked) and the list of pending cases."""
+    lines = [
         "",
         "## Checks",
         "",
@@ -459,6 +471,71 @@ def write_report(
             "",
         ]
         lines += [f"- `{case}`: {note}" for case, note in pending.items()]
+    return lines
+
+
+def _case_lines(
+    case: Case, jobs: list[Job], out: Path, plots: Path, metrics: pl.DataFrame, summary: pl.DataFrame
+) -> list[str]:
+    """Write one case's section: description, overrides, and its plots (checks, trajectories, error, pose mapping, bird's-eye)."""
+    case_jobs = [j for j in jobs if j.case.name == case.name]
+    lines = ["", f"## {case.name}", "", case.description, ""]
+    if case.overrides:
+        lines += [
+            f"Overrides: {', '.join(f'`{o}`' for o in case.overrides)}; seeds {', '.join(map(str, case.seeds))}.",
+            "",
+        ]
+    checks_png = plot_checks(plots / f"{_slug(case.name)}_checks.png", case, metrics, summary)
+    if checks_png is not None:
+        lines += [f"![checks]({PLOTS_DIR}/{checks_png.name})", ""]
+    traj, err = plot_trajectories(plots / f"{_slug(case.name)}_trajectories.png", case, case_jobs, out)
+    for png, title in ((traj, "trajectories"), (err, "error over time")):
+        if png is not None:
+            lines += [f"![{title}]({PLOTS_DIR}/{png.name})", ""]
+    pm = plot_posemap(plots / f"{_slug(case.name)}_posemap.png", case, case_jobs, out)
+    if pm is not None:
+        lines += [f"![pose mapping]({PLOTS_DIR}/{pm.name})", ""]
+    be = copy_birdseye(plots / f"{_slug(case.name)}_birdseye.png", case_jobs, out)
+    if be is not None:
+        lines += [
+            "Bird's-eye view (ours, SIMLAN's method, ground truth):",
+            "",
+            f"![bird's-eye]({PLOTS_DIR}/{be.name})",
+            "",
+        ]
+    return lines
+
+
+def _runs_lines(jobs: list[Job]) -> list[str]:
+    """Write the table of runs: case, seed, run directory and which replays failed."""
+    lines = ["", "## Runs", "", "| case | seed | run directory | replays |", "| --- | --- | --- | --- |"]
+    for j in jobs:
+        status = j.error or ", ".join(
+            f"{k}: {'ok' if k in j.sources else 'FAILED ' + v}"
+            for k, v in {**dict.fromkeys(j.case.replay, ""), **j.errors}.items()
+            if k != "run"
+        )
+        lines.append(f"| {j.case.name} | {j.seed} | `{j.run_dir}` | {status or '-'} |")
+    return lines
+
+
+def write_report(
+    out: Path,
+    suite: Suite,
+    cases: list[Case],
+    jobs: list[Job],
+    metrics: pl.DataFrame,
+    summary: pl.DataFrame,
+    *,
+    faults: list[Fault],
+    timings: dict[str, float],
+    reused: Path | None,
+) -> Path:
+    """Write report.md: header, checks, one section per grid family or case (with plots), runs."""
+    plots = out / PLOTS_DIR
+    plots.mkdir(exist_ok=True)
+    lines = _header_lines(suite, summary, faults, timings, reused)
+    lines += _checks_lines(summary)
     families: dict[str, list[Case]] = {}
     for case in cases:
         if not case.pending:
@@ -470,40 +547,8 @@ def write_report(
             if grid_png is not None:
                 lines += [f"![{family} grid]({PLOTS_DIR}/{grid_png.name})", ""]
             continue
-        case = members[0]
-        case_jobs = [j for j in jobs if j.case.name == case.name]
-        lines += ["", f"## {case.name}", "", case.description, ""]
-        if case.overrides:
-            lines += [
-                f"Overrides: {', '.join(f'`{o}`' for o in case.overrides)}; seeds {', '.join(map(str, case.seeds))}.",
-                "",
-            ]
-        checks_png = plot_checks(plots / f"{_slug(case.name)}_checks.png", case, metrics, summary)
-        if checks_png is not None:
-            lines += [f"![checks]({PLOTS_DIR}/{checks_png.name})", ""]
-        traj, err = plot_trajectories(plots / f"{_slug(case.name)}_trajectories.png", case, case_jobs, out)
-        for png, title in ((traj, "trajectories"), (err, "error over time")):
-            if png is not None:
-                lines += [f"![{title}]({PLOTS_DIR}/{png.name})", ""]
-        pm = plot_posemap(plots / f"{_slug(case.name)}_posemap.png", case, case_jobs, out)
-        if pm is not None:
-            lines += [f"![pose mapping]({PLOTS_DIR}/{pm.name})", ""]
-        be = copy_birdseye(plots / f"{_slug(case.name)}_birdseye.png", case_jobs, out)
-        if be is not None:
-            lines += [
-                "Bird's-eye view (ours, SIMLAN's method, ground truth):",
-                "",
-                f"![bird's-eye]({PLOTS_DIR}/{be.name})",
-                "",
-            ]
-    lines += ["", "## Runs", "", "| case | seed | run directory | replays |", "| --- | --- | --- | --- |"]
-    for j in jobs:
-        status = j.error or ", ".join(
-            f"{k}: {'ok' if k in j.sources else 'FAILED ' + v}"
-            for k, v in {**dict.fromkeys(j.case.replay, ""), **j.errors}.items()
-            if k != "run"
-        )
-        lines.append(f"| {j.case.name} | {j.seed} | `{j.run_dir}` | {status or '-'} |")
+        lines += _case_lines(members[0], jobs, out, plots, metrics, summary)
+    lines += _runs_lines(jobs)
     path = out / REPORT_NAME
     path.write_text("\n".join(lines) + "\n")
     return path
