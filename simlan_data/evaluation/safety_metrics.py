@@ -26,11 +26,12 @@ period):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from shapely.geometry import Polygon
 
 from simlan_data.algorithms.safety import (
     CAUSES,
@@ -48,11 +49,12 @@ from simlan_data.algorithms.safety.conditions import (
     unobserved,
     worst_approach,
 )
-from simlan_data.algorithms.safety.geometry import footprint_polygon
+from simlan_data.algorithms.safety.geometry import Zone, footprint_polygon
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.metrics import Visibility
 from simlan_data.evaluation.safety_inputs import (
     SafetyRecording,
+    Truth,
     agent_specs,
     read_safety_recording,
     safety_params,
@@ -160,6 +162,203 @@ def truth_hazards(
     return out
 
 
+@dataclass(frozen=True)
+class _Robot:
+    """One robot's ground truth at the control ticks, as every check of :func:`evaluate` reads it."""
+
+    ns: str
+    tr: Truth
+    n: int
+    stopped: NDArray[np.bool_]  # the run (recorded or counterfactual) commanded a stop
+    cmd_v: NDArray[np.float64]  # |commanded linear speed|
+    moving: NDArray[np.bool_]  # driving (true speed) or commanded to
+    flags: dict[str, NDArray[np.bool_]]  # truth hazards per cause
+    zones: list[Zone]  # the zones that apply to it
+    shapes: list[Polygon]  # its true footprint per tick
+
+
+@dataclass
+class _Tally:
+    """What :func:`evaluate` sums over robots; :meth:`metrics` turns it into the run's ``{prefix}.*``."""
+
+    violations: list[Violation] = field(default_factory=list)
+    hazards: list[Hazard] = field(default_factory=list)
+    tot: dict[str, float] = field(
+        default_factory=lambda: dict.fromkeys(
+            ("stops", "slows", "false_stops", "unanswered", "moving", "standing", "visible"), 0.0
+        )
+    )
+    stops_by_cause: dict[str, float] = field(default_factory=lambda: dict.fromkeys(CAUSES, 0.0))
+    latencies: list[float] = field(default_factory=list)
+    stop_dists: list[float] = field(default_factory=list)
+    clearances: list[float] = field(default_factory=list)
+    zone_clear: list[float] = field(default_factory=list)
+
+    def metrics(self, prefix: str, budget_s: float) -> dict[str, float]:
+        """Sum the robots' violations, stops, latencies and clearances into the run's metrics."""
+        violations, tot, latencies, stop_dists = self.violations, self.tot, self.latencies, self.stop_dists
+        clearances, zone_clear = self.clearances, self.zone_clear
+        out: dict[str, float] = {}
+        kinds = {
+            k: sum(1 for v in violations if v.kind == k) for k in ("zone_entry", "collision", "unobserved")
+        }
+        out[f"{prefix}.violations"] = float(len(violations))
+        out[f"{prefix}.violations.zone_entries"] = float(kinds["zone_entry"])
+        out[f"{prefix}.violations.collisions"] = float(kinds["collision"])
+        out[f"{prefix}.violations.unobserved"] = float(kinds["unobserved"])
+        out[f"{prefix}.missed"] = float(
+            sum(1 for v in violations if v.kind == "zone_entry" or not v.stopped_in_time)
+        )
+        out[f"{prefix}.stops"] = tot["stops"]
+        for cause, count in self.stops_by_cause.items():
+            out[f"{prefix}.stops.{cause}"] = count
+        out[f"{prefix}.slows"] = tot["slows"]
+        out[f"{prefix}.false_stops"] = tot["false_stops"]
+        out[f"{prefix}.stops_while_visible"] = tot["visible"]
+        out[f"{prefix}.hazards"] = float(len(self.hazards))
+        out[f"{prefix}.hazards_unanswered"] = tot["unanswered"]
+        out[f"{prefix}.max_latency_s"] = max(latencies) if latencies else float("nan")
+        out[f"{prefix}.latency_budget_s"] = budget_s
+        out[f"{prefix}.max_stop_distance_m"] = max(stop_dists) if stop_dists else 0.0
+        out[f"{prefix}.min_clearance_m"] = min(clearances + zone_clear, default=float("inf"))
+        out[f"{prefix}.min_clearance_zone_m"] = min(zone_clear, default=float("inf"))
+        out[f"{prefix}.min_clearance_agents_m"] = min(clearances, default=float("inf"))
+        out[f"{prefix}.collisions_moving"] = tot["moving"]
+        out[f"{prefix}.collisions_standing"] = tot["standing"]
+        return out
+
+
+def _robot(
+    rec: SafetyRecording,
+    ns: str,
+    params: SafetyParams,
+    states: dict[str, list[str]],
+    flags: dict[str, NDArray[np.bool_]],
+) -> _Robot:
+    """Gather one robot's truth, commands, stops and footprints at the control ticks."""
+    tr = rec.truth[ns]
+    n = len(rec.ticks)
+    st = np.array(states.get(ns, [DRIVE] * n))
+    stopped = st == STOP
+    cmd_v = np.abs(rec.commands[ns][:, 0])
+    moving = (np.abs(tr.speed_mps) > MOVING_MPS) | (cmd_v > 0.01)
+    zones = [z for z in params.zones if z.applies_to(ns)]
+    shapes = [footprint_polygon(tr.at(i), rec.specs[ns].footprint) for i in range(n)]
+    return _Robot(ns, tr, n, stopped, cmd_v, moving, flags, zones, shapes)
+
+
+def _zone_entries(rec: SafetyRecording, r: _Robot, tally: _Tally) -> list[Violation]:
+    """Find the true footprint's entries into the zones that apply (never stopped in time)."""
+    v_ns: list[Violation] = []
+    for z in r.zones:
+        inside = np.array([s.intersects(z.polygon) for s in r.shapes])
+        for i in _edges(inside):
+            v_ns.append(Violation(r.ns, "zone_entry", int(rec.ticks[i]), z.name, bool(r.moving[i]), False))
+        tally.zone_clear.append(min(float(s.distance(z.polygon)) for s in r.shapes))
+    return v_ns
+
+
+def _collisions(
+    rec: SafetyRecording, r: _Robot, params: SafetyParams, tol: int, tally: _Tally
+) -> list[Violation]:
+    """Find the contact episodes over the force threshold and whether the robot stopped within the budget."""
+    dt = params.control_period_s
+    tr, n, stopped, moving = r.tr, r.n, r.stopped, r.moving
+    v_ns: list[Violation] = []
+    # the recorded collision sensor is ground truth
+    force = np.array([c[0] for c in rec.contacts[r.ns]])
+    touching = (force >= params.collision.force_threshold_n) & (force > 0)
+    for i in _edges(touching, merge=round(1.0 / dt)):
+        lo = max(0, i - 5)
+        was_moving = bool((np.abs(tr.speed_mps[lo : i + 1]) > MOVING_MPS).any())
+        j = min(n - 1, i + tol)
+        ok = bool(stopped[i : j + 1].any()) or not bool(moving[j])
+        who = ", ".join(rec.contacts[r.ns][i][1])
+        v_ns.append(Violation(r.ns, "collision", int(rec.ticks[i]), who, was_moving, ok))
+        tally.tot["moving" if was_moving else "standing"] += 1
+    return v_ns
+
+
+def _unobserved_intervals(rec: SafetyRecording, r: _Robot, tol: int) -> list[Violation]:
+    """Find the true unobserved intervals and whether the robot was stopped one budget after the timeout."""
+    v_ns: list[Violation] = []
+    for i in _edges(r.flags["unobserved"]):
+        j = min(r.n - 1, i + tol)
+        ok = bool(r.stopped[j]) or r.cmd_v[j] <= 0.01
+        v_ns.append(Violation(r.ns, "unobserved", int(rec.ticks[i]), "", bool(r.moving[i]), ok))
+    return v_ns
+
+
+def _latencies(rec: SafetyRecording, r: _Robot, params: SafetyParams, tol: int, tally: _Tally) -> list[float]:
+    """Time each truth hazard's onset (while moving) to the robot's stop command; unanswered ones count."""
+    lat_ns: list[float] = []
+    for cause in CAUSES:
+        if not params.applies(r.ns, cause):
+            continue
+        for i in _edges(r.flags[cause]):
+            if not r.moving[i] and not r.stopped[i]:
+                continue  # standing still: nothing to stop
+            first = np.flatnonzero(r.stopped[max(0, i - tol) :])
+            if len(first) == 0:
+                tally.hazards.append(Hazard(r.ns, cause, int(rec.ticks[i]), None))
+                tally.tot["unanswered"] += 1
+                continue
+            j = max(0, i - tol) + int(first[0])
+            lat = max(0.0, (int(rec.ticks[j]) - int(rec.ticks[i])) / NS_PER_S)
+            tally.hazards.append(Hazard(r.ns, cause, int(rec.ticks[i]), lat))
+            lat_ns.append(lat)
+    return lat_ns
+
+
+def _stops(
+    rec: SafetyRecording,
+    r: _Robot,
+    params: SafetyParams,
+    stops: list[SafetyEvent],
+    tol: int,
+    tally: _Tally,
+) -> tuple[int, list[float]]:
+    """Check each stop against the truth hazard of its cause and measure its distance to standstill.
+
+    Returns the number of false stops and the stop distances.
+    """
+    dt = params.control_period_s
+    tr, n, flags = r.tr, r.n, r.flags
+    false = 0
+    dists = []
+    found = rec.detections.get(r.ns, np.zeros(0, dtype=np.int64))
+    for e in stops:
+        i = rec.index(e.stamp_ns)
+        justified = e.cause not in flags or bool(flags[e.cause][max(0, i - tol) : i + tol + 1].any())
+        if e.cause == "unobserved" and not justified:
+            k = int(np.searchsorted(found, e.stamp_ns, side="right"))
+            dropout_s = (e.stamp_ns - int(found[k - 1])) / NS_PER_S if k > 0 else float("inf")
+            justified = dropout_s > params.observability.timeout_s
+            tally.tot["visible"] += 1
+        if not justified:
+            false += 1
+        tally.stops_by_cause[e.cause] = tally.stops_by_cause.get(e.cause, 0.0) + 1
+        j = i
+        end = min(n - 1, i + round(5.0 / dt))
+        while j < end and abs(tr.speed_mps[j]) > STANDSTILL_MPS:
+            j += 1
+        dists.append(float(np.sum(np.hypot(*np.diff(tr.pose[i : j + 1, :2], axis=0).T))) if j > i else 0.0)
+    return false, dists
+
+
+def _agent_clearance(rec: SafetyRecording, r: _Robot) -> float:
+    """Smallest true distance between the robot's footprint and another agent's, over the run."""
+    others = [o for o in rec.specs if o != r.ns and o in rec.truth]
+    return min(
+        (
+            float(r.shapes[i].distance(footprint_polygon(rec.truth[o].at(i), rec.specs[o].footprint)))
+            for o in others
+            for i in range(r.n)
+        ),
+        default=float("inf"),
+    )
+
+
 def evaluate(
     rec: SafetyRecording,
     params: SafetyParams,
@@ -174,111 +373,30 @@ def evaluate(
     dt = params.control_period_s
     tol = int(np.ceil(budget_s / dt - 1e-9))
     hazards_truth = truth_hazards(rec, params, states, cameras)
-    violations: list[Violation] = []
-    hazards: list[Hazard] = []
+    tally = _Tally()
     out: dict[str, float] = {}
-    tot = dict.fromkeys(("stops", "slows", "false_stops", "unanswered", "moving", "standing", "visible"), 0.0)
-    stops_by_cause = dict.fromkeys(CAUSES, 0.0)
-    latencies: list[float] = []
-    stop_dists: list[float] = []
-    clearances: list[float] = []
-    zone_clear: list[float] = []
     for ns in rec.robots:
         if ns not in rec.truth:
             continue
-        tr = rec.truth[ns]
-        n = len(rec.ticks)
-        st = np.array(states.get(ns, [DRIVE] * n))
-        stopped = st == STOP
-        cmd_v = np.abs(rec.commands[ns][:, 0])
-        moving = (np.abs(tr.speed_mps) > MOVING_MPS) | (cmd_v > 0.01)
-        flags = hazards_truth[ns]
-        guarded = params.applies(ns)
+        r = _robot(rec, ns, params, states, hazards_truth[ns])
         mine = [e for e in events if e.namespace == ns]
-        v_ns: list[Violation] = []
-        # zone entries
-        zones = [z for z in params.zones if z.applies_to(ns)]
-        shapes = [footprint_polygon(tr.at(i), rec.specs[ns].footprint) for i in range(n)]
-        for z in zones:
-            inside = np.array([s.intersects(z.polygon) for s in shapes])
-            for i in _edges(inside):
-                v_ns.append(Violation(ns, "zone_entry", int(rec.ticks[i]), z.name, bool(moving[i]), False))
-            zone_clear.append(min(float(s.distance(z.polygon)) for s in shapes))
-        # collisions (the recorded collision sensor is ground truth)
-        force = np.array([c[0] for c in rec.contacts[ns]])
-        touching = (force >= params.collision.force_threshold_n) & (force > 0)
-        for i in _edges(touching, merge=round(1.0 / dt)):
-            lo = max(0, i - 5)
-            was_moving = bool((np.abs(tr.speed_mps[lo : i + 1]) > MOVING_MPS).any())
-            j = min(n - 1, i + tol)
-            ok = bool(stopped[i : j + 1].any()) or not bool(moving[j])
-            who = ", ".join(rec.contacts[ns][i][1])
-            v_ns.append(Violation(ns, "collision", int(rec.ticks[i]), who, was_moving, ok))
-            tot["moving" if was_moving else "standing"] += 1
-        # unobserved for longer than the timeout (ground truth)
-        for i in _edges(flags["unobserved"]):
-            j = min(n - 1, i + tol)
-            ok = bool(stopped[j]) or cmd_v[j] <= 0.01
-            v_ns.append(Violation(ns, "unobserved", int(rec.ticks[i]), "", bool(moving[i]), ok))
-        violations += v_ns
-        # hazards: onset in ground truth -> stop command
-        lat_ns: list[float] = []
-        if guarded:
-            for cause in CAUSES:
-                if not params.applies(ns, cause):
-                    continue
-                for i in _edges(flags[cause]):
-                    if not moving[i] and not stopped[i]:
-                        continue  # standing still: nothing to stop
-                    first = np.flatnonzero(stopped[max(0, i - tol) :])
-                    if len(first) == 0:
-                        hazards.append(Hazard(ns, cause, int(rec.ticks[i]), None))
-                        tot["unanswered"] += 1
-                        continue
-                    j = max(0, i - tol) + int(first[0])
-                    lat = max(0.0, (int(rec.ticks[j]) - int(rec.ticks[i])) / NS_PER_S)
-                    hazards.append(Hazard(ns, cause, int(rec.ticks[i]), lat))
-                    lat_ns.append(lat)
-        latencies += lat_ns
-        # stops: counted, checked against the truth hazard of their cause, distance to standstill
+        v_ns = _zone_entries(rec, r, tally)
+        v_ns += _collisions(rec, r, params, tol, tally)
+        v_ns += _unobserved_intervals(rec, r, tol)
+        tally.violations += v_ns
+        lat_ns = _latencies(rec, r, params, tol, tally) if params.applies(ns) else []
+        tally.latencies += lat_ns
         stops = [e for e in mine if e.action == STOP]
-        false = 0
-        dists = []
-        found = rec.detections.get(ns, np.zeros(0, dtype=np.int64))
-        for e in stops:
-            i = rec.index(e.stamp_ns)
-            justified = e.cause not in flags or bool(flags[e.cause][max(0, i - tol) : i + tol + 1].any())
-            if e.cause == "unobserved" and not justified:
-                k = int(np.searchsorted(found, e.stamp_ns, side="right"))
-                dropout_s = (e.stamp_ns - int(found[k - 1])) / NS_PER_S if k > 0 else float("inf")
-                justified = dropout_s > params.observability.timeout_s
-                tot["visible"] += 1
-            if not justified:
-                false += 1
-            stops_by_cause[e.cause] = stops_by_cause.get(e.cause, 0.0) + 1
-            j = i
-            end = min(n - 1, i + round(5.0 / dt))
-            while j < end and abs(tr.speed_mps[j]) > STANDSTILL_MPS:
-                j += 1
-            dists.append(
-                float(np.sum(np.hypot(*np.diff(tr.pose[i : j + 1, :2], axis=0).T))) if j > i else 0.0
-            )
-        stop_dists += dists
-        tot["stops"] += len(stops)
-        tot["slows"] += sum(1 for e in mine if e.action == "slow")
-        tot["false_stops"] += false
-        # clearance to the other agents
-        others = [o for o in rec.specs if o != ns and o in rec.truth]
-        agent_gap = min(
-            (
-                float(shapes[i].distance(footprint_polygon(rec.truth[o].at(i), rec.specs[o].footprint)))
-                for o in others
-                for i in range(n)
-            ),
-            default=float("inf"),
+        false, dists = _stops(rec, r, params, stops, tol, tally)
+        tally.stop_dists += dists
+        tally.tot["stops"] += len(stops)
+        tally.tot["slows"] += sum(1 for e in mine if e.action == "slow")
+        tally.tot["false_stops"] += false
+        agent_gap = _agent_clearance(rec, r)
+        tally.clearances.append(agent_gap)
+        zgap = min(
+            (min(float(s.distance(z.polygon)) for s in r.shapes) for z in r.zones), default=float("inf")
         )
-        clearances.append(agent_gap)
-        zgap = min((min(float(s.distance(z.polygon)) for s in shapes) for z in zones), default=float("inf"))
         p = f"{prefix}.{ns}."
         out[p + "stops"] = float(len(stops))
         out[p + "violations"] = float(len(v_ns))
@@ -287,31 +405,8 @@ def evaluate(
         out[p + "max_latency_s"] = max(lat_ns) if lat_ns else float("nan")
         out[p + "max_stop_distance_m"] = max(dists) if dists else 0.0
         out[p + "min_clearance_m"] = min(agent_gap, zgap)
-    kinds = {k: sum(1 for v in violations if v.kind == k) for k in ("zone_entry", "collision", "unobserved")}
-    out[f"{prefix}.violations"] = float(len(violations))
-    out[f"{prefix}.violations.zone_entries"] = float(kinds["zone_entry"])
-    out[f"{prefix}.violations.collisions"] = float(kinds["collision"])
-    out[f"{prefix}.violations.unobserved"] = float(kinds["unobserved"])
-    out[f"{prefix}.missed"] = float(
-        sum(1 for v in violations if v.kind == "zone_entry" or not v.stopped_in_time)
-    )
-    out[f"{prefix}.stops"] = tot["stops"]
-    for cause, count in stops_by_cause.items():
-        out[f"{prefix}.stops.{cause}"] = count
-    out[f"{prefix}.slows"] = tot["slows"]
-    out[f"{prefix}.false_stops"] = tot["false_stops"]
-    out[f"{prefix}.stops_while_visible"] = tot["visible"]
-    out[f"{prefix}.hazards"] = float(len(hazards))
-    out[f"{prefix}.hazards_unanswered"] = tot["unanswered"]
-    out[f"{prefix}.max_latency_s"] = max(latencies) if latencies else float("nan")
-    out[f"{prefix}.latency_budget_s"] = budget_s
-    out[f"{prefix}.max_stop_distance_m"] = max(stop_dists) if stop_dists else 0.0
-    out[f"{prefix}.min_clearance_m"] = min(clearances + zone_clear, default=float("inf"))
-    out[f"{prefix}.min_clearance_zone_m"] = min(zone_clear, default=float("inf"))
-    out[f"{prefix}.min_clearance_agents_m"] = min(clearances, default=float("inf"))
-    out[f"{prefix}.collisions_moving"] = tot["moving"]
-    out[f"{prefix}.collisions_standing"] = tot["standing"]
-    return out, violations, hazards
+    out.update(tally.metrics(prefix, budget_s))
+    return out, tally.violations, tally.hazards
 
 
 def recording_safety_metrics(
