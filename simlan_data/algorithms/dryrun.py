@@ -95,7 +95,7 @@ def dry_run(
         finished,
         float(min_gap),
         min_pair,
-        {ns: stack.coordinator.waits.get(ns, 0) * dt for ns in stack.navigators},
+        {ns: getattr(stack.coordinator, "waits", {}).get(ns, 0) * dt for ns in stack.navigators},
         {ns: np.array(v) for ns, v in traj.items()},
         list(stack.safety.events),
     )

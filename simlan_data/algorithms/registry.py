@@ -1,14 +1,16 @@
 """Find, check and build the algorithm of each role: entry points or an import path.
 
 An algorithm is registered under a name in the entry-point group ``simlan_data.algorithms``
-(ours in simlan_data's own pyproject.toml, a user's in theirs)::
+(ours in simlan_data's own pyproject.toml, a user's in theirs), as ``NAME`` or ``ROLE.NAME`` (the
+prefix lets one package give one name to algorithms of several roles)::
 
     [project.entry-points."simlan_data.algorithms"]
     centroid = "my_package.localizer:CentroidLocalizer"
+    "stitcher.fast" = "my_package.stitch:FastStitcher"
 
 or named by import path, ``my_package.localizer:CentroidLocalizer``, without registering. The
 class says its role (``role``) and its config dataclass (``config_class``); see
-:mod:`simlan_data.algorithms.roles`. One name may serve several roles (one class per role).
+:mod:`simlan_data.algorithms.roles`.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ DEFAULTS = {  # the built-in algorithm of each role (registered like any other)
     "coordinator": "gpss",
     "safety": "trees",
     "stitcher": "gpss",
-    "posemap": "projection",
+    "posemap": "trained",
 }
 NAME_KEY = "name"  # the config key that selects the algorithm of a role
 
@@ -138,11 +140,18 @@ def _registered() -> dict[tuple[str, str], AlgorithmSpec]:
         except Exception:  # reported when it is selected (see resolve)
             continue
         role = getattr(cls, "role", None)
-        if role in ROLES and isinstance(cls, type):
+        prefix, name = _split(ep.name)
+        if role in ROLES and isinstance(cls, type) and prefix in (None, role):
             config_class = getattr(cls, "config_class", None)
             if config_class is not None and dataclasses.is_dataclass(config_class):
-                out[(role, ep.name)] = AlgorithmSpec(role, ep.name, cls, config_class, _origin(ep))
+                out[(role, name)] = AlgorithmSpec(role, name, cls, config_class, _origin(ep))
     return out
+
+
+def _split(entry_point_name: str) -> tuple[str | None, str]:
+    """(role, name) of an entry point named ``ROLE.NAME``, (None, name) of one named ``NAME``."""
+    role, dot, name = entry_point_name.partition(".")
+    return (role, name) if dot and role in ROLES else (None, entry_point_name)
 
 
 def resolve(role: str, name: str, *, where: str = "algorithms") -> AlgorithmSpec:
@@ -156,14 +165,18 @@ def resolve(role: str, name: str, *, where: str = "algorithms") -> AlgorithmSpec
         raise ConfigError(
             f"unknown role {role!r}", where, f"roles are {', '.join(ROLES)}", "choose one of them"
         )
-    where = f"{where}.{role}.{NAME_KEY}={name}"
+    where = f"{where} (algorithms/{role}={name})"
     spec = _registered().get((role, name))
     if spec is None:
         if ":" in name:
             cls = _load(name, where=where, role=role)
             spec = AlgorithmSpec(role, name, cls, getattr(cls, "config_class", None), "import path")  # type: ignore[arg-type]
         else:
-            broken = [ep for ep in _entry_points() if ep.name == name]
+            broken = [
+                ep
+                for ep in _entry_points()
+                if _split(ep.name)[1] == name and _split(ep.name)[0] in (None, role)
+            ]
             if broken:  # registered, but it does not load or declares another role
                 cls = _load(broken[0].value, where=where, role=role)
                 spec = AlgorithmSpec(role, name, cls, getattr(cls, "config_class", None), _origin(broken[0]))  # type: ignore[arg-type]

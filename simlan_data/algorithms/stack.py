@@ -26,8 +26,9 @@ from shapely.geometry import MultiPolygon, Polygon
 from shapely.ops import unary_union
 
 from simlan_data.algorithms.aruco_localizer import ArucoLocalizer
-from simlan_data.algorithms.coordinator import Coordinator, Decision, Intent, footprint_polygon, swept_claim
+from simlan_data.algorithms.coordinator import Decision, Intent, footprint_polygon, swept_claim
 from simlan_data.algorithms.follower import FollowerParams, PursuitParams, WaypointFollower
+from simlan_data.algorithms.gpss_coordinator import GpssCoordinator, GpssCoordinatorConfig
 from simlan_data.algorithms.localization import ImageSearch, LocalizerParams, PoseEstimate
 from simlan_data.algorithms.markers import MarkerMount
 from simlan_data.algorithms.navigation import Navigator
@@ -40,7 +41,7 @@ from simlan_data.algorithms.people import (
     fuse_people,
 )
 from simlan_data.algorithms.planner import GridPlanner
-from simlan_data.algorithms.roles import CameraFrame, LocalizerContext, searches
+from simlan_data.algorithms.roles import CameraFrame, CoordinatorContext, LocalizerContext, searches
 from simlan_data.algorithms.safety import (
     FREE,
     STOP,
@@ -57,6 +58,7 @@ from simlan_data.geometry.camera import CameraModel
 from simlan_data.world.agent_types import MARKER_SIZE_M, AgentType
 
 DRIVE_KINDS = {"diff": "robot", "walker": "person", "static": "static"}
+DEFAULT_CLAIM_HORIZON_M = 3.0  # a detour keeps clear of this much of a driving robot's plan
 PERSON_FOOTPRINT = (-0.2, 0.2, -0.3, 0.3)  # the humanoid's footprint, for the coordinator
 
 
@@ -103,6 +105,7 @@ class GpssStack:
         *,
         nav: NavigationParams,
         localizer: Callable[[LocalizerContext], Any] | None = None,
+        coordinator: Callable[[CoordinatorContext], Any] | None = None,
         source: str = "camera",
         safety: SafetyParams | None = None,
         people: PeopleParams | None = None,
@@ -126,7 +129,9 @@ class GpssStack:
         self.localizer = make(LocalizerContext(cameras, mounts))
         self.searching = searches(self.localizer)  # the optional fast path (see roles)
         self._frames: dict[str, CameraFrame] = {}
-        self.coordinator = Coordinator(safety_distance_m=nav.safety_distance_m)
+        make_coordinator = coordinator or (lambda ctx: GpssCoordinator(GpssCoordinatorConfig(), ctx))
+        self.coordinator = make_coordinator(CoordinatorContext(safety_distance_m=nav.safety_distance_m))
+        self._granted: set[str] = set()  # robots the coordinator let drive at the last decision
         # the last pose GPSS knew of every robot: its spawn pose until the cameras first see it
         self.last_known: dict[str, tuple[float, float, float]] = {a.namespace: a.pose for a in agents}
         self.navigators: dict[str, Navigator] = {}
@@ -294,6 +299,7 @@ class GpssStack:
             )
         if self.nav.coordination:
             out.decisions = self.coordinator.decide(t_ns, intents)
+            self._granted = {ns for ns, d in out.decisions.items() if d.speed_limit_mps is None}
         if self.safety.trees:
             world = SafetyWorld(
                 t_ns,
@@ -344,12 +350,12 @@ class GpssStack:
         nav, kind = self.navigators[ns], self.agents[ns].kind
         x0, x1, y0, y1 = kind.footprint_m
         reach = float(np.hypot(max(abs(x0), abs(x1)), max(abs(y0), abs(y1))))
-        c = self.coordinator
+        horizon, grow = self._claim_horizon_m(), 0.5 * self.nav.safety_distance_m
         obstacles = unary_union(
             [
-                swept_claim(o, horizon_m=c.horizon_m, grow_m=0.5 * c.safety_distance_m)
-                if o.namespace in c.granted
-                else footprint_polygon(o.pose_xyyaw, o.footprint_m, grow_m=0.5 * c.safety_distance_m)
+                swept_claim(o, horizon_m=horizon, grow_m=grow)
+                if o.namespace in self._granted
+                else footprint_polygon(o.pose_xyyaw, o.footprint_m, grow_m=grow)
                 for o in others
             ]
         )
@@ -359,15 +365,18 @@ class GpssStack:
                 continue
             probe = Intent(ns, 0, pose, kind.footprint_m, plan.points_xy)
             length = float(np.sum(np.linalg.norm(np.diff(plan.points_xy, axis=0), axis=1)))
-            claim = swept_claim(probe, horizon_m=length, grow_m=0.5 * c.safety_distance_m)
+            claim = swept_claim(probe, horizon_m=length, grow_m=grow)
             # its own footprint now may touch others (that is why it waits): check the path ahead
-            ahead = claim.difference(
-                footprint_polygon(pose, kind.footprint_m, grow_m=0.5 * c.safety_distance_m)
-            )
+            ahead = claim.difference(footprint_polygon(pose, kind.footprint_m, grow_m=grow))
             if not ahead.intersects(obstacles):
                 nav.adopt(plan)
                 return True
         return False
+
+    def _claim_horizon_m(self) -> float:
+        """How far ahead a driving robot claims the floor, for detours: the coordinator's own
+        horizon where it has one (the built-in's ``horizon_m``), else 3 m."""
+        return float(getattr(self.coordinator, "horizon_m", DEFAULT_CLAIM_HORIZON_M))
 
     def _others_mask(
         self, ns: str, pose: tuple[float, float, float], others: list[Intent], margin_m: float
@@ -380,9 +389,9 @@ class GpssStack:
         mask = np.zeros(self.grid.shape, dtype=np.uint8)
         grow = margin_m + self.nav.safety_distance_m
         for other in others:
-            moving = other.namespace in self.coordinator.granted
+            moving = other.namespace in self._granted
             shape = (
-                swept_claim(other, horizon_m=self.coordinator.horizon_m, grow_m=grow)
+                swept_claim(other, horizon_m=self._claim_horizon_m(), grow_m=grow)
                 if moving
                 else footprint_polygon(other.pose_xyyaw, other.footprint_m, grow_m=grow)
             )

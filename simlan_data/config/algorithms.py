@@ -18,9 +18,10 @@ import re
 import sys
 from collections.abc import Iterable
 from dataclasses import dataclass, field, make_dataclass
-from typing import Any
+from typing import Any, get_type_hints
 
 from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
 
 from simlan_data.algorithms import registry
 from simlan_data.algorithms.roles import ROLES
@@ -41,24 +42,49 @@ class AlgorithmsConfig:
 
 
 def selection_node(spec: registry.AlgorithmSpec) -> type:
-    """The algorithm's config dataclass with a ``name`` field: the Hydra node of the option."""
+    """The Hydra node of an option: the algorithm's config fields plus its ``name``.
+
+    A copy of the fields, not a subclass: a frozen config dataclass would make the node read-only
+    (no ``algorithms.ROLE.KEY=VALUE`` overrides). Its ``__post_init__`` builds the algorithm's own
+    dataclass from the values, so the algorithm's checks run when the config is built.
+    """
     base = spec.config_class
-    params = getattr(base, "__dataclass_params__", None)
+    hints = get_type_hints(base)
+    fields = []
+    for f in dataclasses.fields(base):
+        if not f.init:
+            continue
+        if f.default is not dataclasses.MISSING:
+            fields.append((f.name, hints[f.name], field(default=f.default)))
+        elif f.default_factory is not dataclasses.MISSING:
+            fields.append((f.name, hints[f.name], field(default_factory=f.default_factory)))
+        else:
+            fields.append((f.name, hints[f.name], field(default=MISSING)))
+    fields.append((registry.NAME_KEY, str, field(default=spec.name)))
+
+    def __post_init__(self: Any) -> None:  # noqa: N807 - the dataclass hook
+        values = plain(self)
+        if any(v == MISSING for v in values.values()):
+            return  # OmegaConf building the node itself
+        spec.make_config(values, where=f"config algorithms.{spec.role}")
+
     return make_dataclass(
-        f"{base.__name__}Selection",
-        [(registry.NAME_KEY, str, field(default=spec.name))],
-        bases=(base,),
-        frozen=bool(params and params.frozen),
+        f"{base.__name__}Selection", fields, namespace={"__post_init__": __post_init__}
     )
 
 
-def selected_by_path(overrides: Iterable[str]) -> list[tuple[str, str]]:
-    """(role, module:Class) of every ``algorithms/ROLE=module:Class`` among the overrides."""
+def selected(overrides: Iterable[str]) -> list[tuple[str, str]]:
+    """(role, name) of every ``algorithms/ROLE=NAME`` among the overrides (a sweep's lists split)."""
     out = []
     for item in overrides:
         m = _SELECT.match(item)
-        if m and m["role"] in ROLES and ":" in m["name"]:
-            out.append((m["role"], m["name"]))
+        if m is None:
+            continue
+        role = m["role"]
+        if role not in ROLES:
+            registry.resolve(role, m["name"], where="command line")  # one line: the known roles
+        for name in m["name"].split(","):
+            out.append((role, name.strip()))
     return out
 
 
@@ -73,9 +99,10 @@ def register_algorithms(overrides: Iterable[str] | None = None) -> None:
         for name in registry.names(role):
             spec = registry.resolve(role, name)
             cs.store(group=GROUP.format(role=role), name=name, node=selection_node(spec))
-    for role, name in selected_by_path(sys.argv[1:] if overrides is None else overrides):
-        spec = registry.resolve(role, name, where="command line")
-        cs.store(group=GROUP.format(role=role), name=name, node=selection_node(spec))
+    for role, name in selected(sys.argv[1:] if overrides is None else overrides):
+        spec = registry.resolve(role, name, where="command line")  # unknown: lists the registered
+        if ":" in name:
+            cs.store(group=GROUP.format(role=role), name=name, node=selection_node(spec))
 
 
 def plain(config: Any) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from simlan_data.config.schema import WorldConfig
 from simlan_data.sim.pybullet_client import Client, connect
 from simlan_data.sim.rendering import EGL_MAX_TILE, LabelTable
 from simlan_data.world._pybullet import pb
-from simlan_data.world.builder import PhysicsParams, WorldBodies, build_world
+from simlan_data.world.builder import WorldBodies, build_world
 from simlan_data.world.layout import load_layout
 
 EYE_HEIGHT_M = 50.0  # above the roofless 8 m building
@@ -48,7 +48,7 @@ def static_world(world_cfg: WorldConfig, *, backend: str = "auto") -> StaticWorl
         pb.setGravity(0.0, 0.0, -world_cfg.gravity_mps2, physicsClientId=cid)
         pb.setTimeStep(1.0 / world_cfg.physics_hz, physicsClientId=cid)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=cid)
-        physics = {name: PhysicsParams(**vars(p)) for name, p in world_cfg.physics.items()}
+        physics = dict(world_cfg.physics)
         placements = load_layout(world_cfg.layout, world_cfg.fidelity)
         with tempfile.TemporaryDirectory(prefix="simlan_world_") as mesh_dir:
             world = build_world(cid, placements, physics, mesh_dir=Path(mesh_dir))

@@ -30,7 +30,7 @@ from simlan_data.sim.rendering import CameraRenderer, LabelTable
 from simlan_data.sim.urdf_check import check_urdf
 from simlan_data.world._pybullet import pb
 from simlan_data.world.agent_types import AgentType, agent_type
-from simlan_data.world.builder import PhysicsParams, WorldBodies, build_world
+from simlan_data.world.builder import WorldBodies, build_world
 from simlan_data.world.layout import Placement, load_layout
 from simlan_data.world.models import BUILDING_X_M, BUILDING_Y_M
 
@@ -193,7 +193,7 @@ class Scene:
         pb.setGravity(0.0, 0.0, -cfg.world.gravity_mps2, physicsClientId=cid)
         pb.setTimeStep(1.0 / cfg.world.physics_hz, physicsClientId=cid)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=cid)
-        physics = {name: PhysicsParams(**vars(p)) for name, p in cfg.world.physics.items()}
+        physics = dict(cfg.world.physics)
         with tempfile.TemporaryDirectory(prefix="simlan_world_") as mesh_dir:
             world = build_world(cid, inputs.placements, physics, mesh_dir=Path(mesh_dir))
         if world.skipped_models:

@@ -33,7 +33,7 @@ from simlan_data import __version__
 from simlan_data.algorithms import registry
 from simlan_data.algorithms.localization import ImageSearch
 from simlan_data.algorithms.people import PeopleParams
-from simlan_data.algorithms.roles import CameraFrame, LocalizerContext
+from simlan_data.algorithms.roles import CameraFrame
 from simlan_data.algorithms.stack import AgentPlan, GpssStack, NavigationParams
 from simlan_data.config.algorithms import plain
 from simlan_data.config.faults import CameraFaults
@@ -204,17 +204,19 @@ class Simulation:
                 nav.coordination,
                 nav.safety_distance_m,
             ),
-            localizer=self._localizer_factory(),
+            localizer=self._factory("localizer"),
+            coordinator=self._factory("coordinator"),
             source=loc.source,
             safety=cfg.safety_params(),
             people=PeopleParams.from_dict(asdict(cfg.safety.people)),
         )
 
-    def _localizer_factory(self) -> Callable[[LocalizerContext], Any]:
-        """Build the selected localizer from its own config, as the replay does (guarded)."""
-        selected = self.cfg.algorithms.localizer
-        spec = registry.resolve("localizer", selected.name)
-        config = spec.make_config(plain(selected), where="config algorithms.localizer")
+    def _factory(self, role: str) -> Callable[[Any], Any]:
+        """Build the selected algorithm of ``role`` from its own config, as the replay does
+        (guarded: an exception inside it names it and the simulated time)."""
+        selected = getattr(self.cfg.algorithms, role)
+        spec = registry.resolve(role, selected.name)
+        config = spec.make_config(plain(selected), where=f"config algorithms.{role}")
         return lambda ctx: registry.Guarded(spec.build(config, ctx), spec)
 
     def _search(

@@ -13,21 +13,9 @@ from simlan_data.world.labels import label_id
 from simlan_data.world.layout import Placement
 from simlan_data.world.mesh import MeshBuilder
 from simlan_data.world.models import ModelSpec, Part, model_spec
+from simlan_data.world.physics import PhysicsParams
 
 MAX_SHAPES_PER_ARRAY = 16  # PyBullet's createVisualShapeArray/createCollisionShapeArray limit
-
-
-@dataclass(frozen=True)
-class PhysicsParams:
-    """Physics parameters of one class of objects (config group ``world.physics``)."""
-
-    mass_kg: float = 0.0
-    lateral_friction: float = 0.8
-    rolling_friction: float = 0.0
-    spinning_friction: float = 0.0
-    restitution: float = 0.0
-    linear_damping: float = 0.04
-    angular_damping: float = 0.04
 
 
 @dataclass
