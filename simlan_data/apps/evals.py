@@ -1,6 +1,7 @@
 """``python -m simlan_data.evals SUITE``: run a V&V suite of ``evals/base.yaml`` and judge it.
 
     python -m simlan_data.evals base [--seeds N] [--reuse DIR] [--inject FAULT ...] [--accept] [--out DIR]
+    python -m simlan_data.evals base --candidate algorithms/localizer=NAME [--candidate KEY=VALUE ...]
     python -m simlan_data.evals golden [--inject FAULT ...] [--accept] [--regenerate]
     python -m simlan_data.evals --list
 
@@ -10,6 +11,13 @@ seeds with its bound and with the accepted baseline, prints a pass/fail table an
 ``OUT/report.md`` with plots, ``OUT/metrics.parquet|csv`` (every metric) and
 ``OUT/summary.parquet|csv`` (verdicts). Exit code 0: every check holds; 1: a check failed or
 regressed; 2: bad arguments. Pending checks (waiting for a capability) never count as passed.
+
+With ``--candidate`` (Hydra overrides of the candidate's runs, repeatable) it runs the suite's jobs
+twice with the same seeds, the baseline (the suite as it is) into ``OUT/baseline/`` and the
+candidate into ``OUT/candidate/``, and writes ``OUT/compare.md|parquet|csv``: per case and checked
+metric both sides' intervals, the paired difference and a verdict (better, worse, no difference;
+:mod:`simlan_data.evaluation.compare`). Exit code 0: the comparison ran (whatever its verdict);
+1: a run or replay failed; 2: bad arguments.
 """
 
 from __future__ import annotations
@@ -29,12 +37,15 @@ import polars as pl
 
 from simlan_data.apps.cli import run_cli
 from simlan_data.constants import CONF_DIR, EVALS_DIR, EVALS_OUTPUT_ROOT, METRICS_FILENAME, RECORDING_DIRNAME
-from simlan_data.errors import EXIT_FAILED_RUN, ConfigError
+from simlan_data.errors import EXIT_FAILED_RUN, ConfigError, SimlanError
 from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
+from simlan_data.evaluation.compare import compare_tables, print_comparison, suite_checks, write_comparison
 from simlan_data.evaluation.suite import (
     FAILING,
+    JOBS_FILE,
     Job,
     accepted,
+    check_jobs,
     collect_run_metrics,
     judge,
     metrics_table,
@@ -45,6 +56,7 @@ from simlan_data.evaluation.suite import (
     reuse,
     simulate,
     write_baseline,
+    write_job_configs,
     write_jobs_file,
 )
 from simlan_data.evaluation.suite_report import print_table, write_report, write_tables
@@ -84,6 +96,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override of every run (repeatable)"
+    )
+    p.add_argument(
+        "--candidate",
+        action="append",
+        default=[],
+        metavar="OVERRIDE",
+        help="compare: run the suite as it is (baseline) and with this Hydra override (candidate; "
+        "repeatable, e.g. algorithms/localizer=centroid), write OUT/compare.md|parquet|csv",
     )
     p.add_argument("--no-report", action="store_true", help="skip report.md and its plots")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -243,6 +263,137 @@ def run_suite(args: argparse.Namespace) -> int:
     return EXIT_FAILED_RUN if failing else 0
 
 
+# ------------------------------------------------------------------ candidate vs baseline
+SIDES = ("baseline", "candidate")
+
+
+def _check_candidate(suite: Suite, cases: list[Case], extra: list[str], candidate: list[str]) -> None:
+    """Compose every job's config on both sides before anything is written.
+
+    Raises:
+        ConfigError: the suite's own cases do not compose (as for a plain suite run), or a
+            candidate override does not (named: the first one that breaks the composition).
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        conf = Path(tmp) / "conf"
+        jobs = plan_jobs(cases, Path(tmp) / "runs")
+        write_job_configs(suite, jobs, conf)
+        check_jobs(jobs, conf, extra)
+        try:
+            check_jobs(jobs, conf, [*extra, *candidate])
+        except ConfigError as err:
+            culprit = candidate[-1]
+            for i in range(1, len(candidate)):  # the first prefix that does not compose names it
+                try:
+                    check_jobs(jobs[:1], conf, [*extra, *candidate[:i]])
+                except ConfigError:
+                    culprit = candidate[i - 1]
+                    break
+            raise ConfigError(
+                f"invalid --candidate {culprit}",
+                err.where,
+                f"{err.what}: {err.why}" if err.what != "invalid overrides" else err.why,
+                "fix the override (python -m simlan_data.run --help lists the groups and keys)",
+            ) from None
+
+
+def _mark_candidate(side_out: Path, candidate: list[str]) -> None:
+    """Record the candidate's overrides in its jobs.json (so --reuse never takes it for a baseline)."""
+    path = side_out / JOBS_FILE
+    doc = json.loads(path.read_text())
+    for entry in doc.values():
+        entry["overrides"] = [*entry["overrides"], *candidate]
+        entry["candidate"] = list(candidate)
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    """Baseline and candidate over the same seeds, then OUT/compare.md|parquet|csv."""
+    suite = load_suite(args.file, args.suite, seeds=args.seeds)
+    for flag, on, why in (
+        ("--accept", args.accept, "a comparison accepts no baseline"),
+        ("--regenerate", args.regenerate, "a comparison regenerates no recordings"),
+        ("--inject", args.inject, "a comparison compares algorithms, not faults"),
+    ):
+        if on:
+            raise ConfigError(f"--candidate with {flag}", "arguments", why, "drop one of them")
+    check_launcher(args.launcher)
+    if args.jobs < 1:
+        raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
+    selected = [c for c in _select(suite, args.only) if not c.pending]
+    cases = [c for c in selected if c.recording is None]
+    if not cases:
+        raise ConfigError(
+            "nothing to compare",
+            f"suite {suite.name}",
+            "no simulated case (a fixed recording replays the algorithms it was recorded with)",
+            "pick simulated cases (e.g. suite base)",
+        )
+    reuse_dir = None
+    if args.reuse is not None:
+        nested = args.reuse / SIDES[0]
+        reuse_dir = nested if (nested / JOBS_FILE).is_file() else args.reuse
+        reusable(reuse_dir)
+    _check_candidate(suite, cases, list(args.set), list(args.candidate))
+    out = _out_dir(args)
+    for c in selected:
+        if c.recording is not None:
+            print(f"note: case {c.name} replays a fixed recording: not compared")
+    tables: dict[str, pl.DataFrame] = {}
+    failures: list[str] = []
+    for side in SIDES:
+        side_out = out / side
+        side_out.mkdir()
+        jobs = plan_jobs(cases, side_out / "runs")
+        extra = [*args.set, *(args.candidate if side == "candidate" else [])]
+        print(
+            f"== {side}"
+            + (f": {' '.join(args.candidate)}" if side == "candidate" else ": the suite as it is")
+        )
+        if side == "baseline" and reuse_dir is not None:
+            reuse(jobs, suite, reuse_dir)
+            print(f"reusing the baseline runs of {reuse_dir}")
+        else:
+            try:
+                simulate(suite, jobs, [], side_out, launcher=args.launcher, n_jobs=args.jobs, extra=extra)
+            except SimlanError as err:  # every run failed: a result to report, not a crash
+                print(f"{side}: {err.line()}")
+                for j in jobs:
+                    j.error = j.error or err.line()
+        write_jobs_file(jobs, suite, [], side_out)
+        if side == "candidate":
+            _mark_candidate(side_out, list(args.candidate))
+        collect_run_metrics(jobs)
+        replay_all(jobs, [], side_out, n_jobs=args.jobs)
+        table = metrics_table(jobs)
+        write_tables(side_out, table, judge(suite, cases, jobs, table, read_baseline(suite.baseline)))
+        tables[side] = table
+        failures += [
+            f"{side}: {j.case.name} seed {j.seed}: {source}: {error}"
+            for j in jobs
+            for source, error in sorted({**({"run": j.error} if j.error else {}), **j.errors}.items())
+        ]
+    comparison = compare_tables(
+        tables["baseline"], tables["candidate"], suite_checks(cases), suite.confidence
+    )
+    path = write_comparison(
+        out,
+        comparison,
+        suite=suite.name,
+        candidate=list(args.candidate),
+        seeds={c.name: list(c.seeds) for c in cases},
+        baseline_dir=reuse_dir or out / "baseline",
+        candidate_dir=out / "candidate",
+        failures=failures,
+    )
+    print()
+    print_comparison(comparison)
+    for f in failures:
+        print(f"FAILED {f}")
+    print(f"comparison: {path} (+ {path.with_suffix('.parquet').name}, {path.with_suffix('.csv').name})")
+    return EXIT_FAILED_RUN if failures else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -251,6 +402,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not args.suite:
         parser.error("give a suite (e.g. base or golden) or --list")
+    if args.candidate:
+        return run_compare(args)
     return run_suite(args)
 
 
