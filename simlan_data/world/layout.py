@@ -67,6 +67,13 @@ def load_layout(path: str | Path, fidelity: str) -> list[Placement]:
             "no such file",
             "set world.layout to a CSV like assets/layout/warehouse_layout.csv",
         )
+    df = _read_layout_csv(p)
+    _check_rows(df, p)
+    return _placements(df, p, fidelity)
+
+
+def _read_layout_csv(p: Path) -> pl.DataFrame:
+    """Read the layout CSV; refuse one unreadable, lacking SIMLAN's columns or too large."""
     try:
         df = pl.read_csv(p, schema_overrides=LAYOUT_COLUMNS, n_rows=MAX_LAYOUT_ROWS + 1)
     except (pl.exceptions.PolarsError, OSError, UnicodeDecodeError) as err:
@@ -87,6 +94,11 @@ def load_layout(path: str | Path, fidelity: str) -> list[Placement]:
         )
     if df.height > MAX_LAYOUT_ROWS:
         raise AssetError("layout file too large", str(p), f"over {MAX_LAYOUT_ROWS} rows", "split the layout")
+    return df
+
+
+def _check_rows(df: pl.DataFrame, p: Path) -> None:
+    """Refuse a row with an empty or non-finite pose or model, or a model this twin has no geometry for."""
     numeric = ["x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad"]
     bad = df.filter(
         pl.any_horizontal([pl.col(c).is_null() | ~pl.col(c).is_finite() for c in numeric])
@@ -110,6 +122,10 @@ def load_layout(path: str | Path, fidelity: str) -> list[Placement]:
             f"this twin has no geometry for it ({len(unknown_models)} unknown: {', '.join(unknown_models[:5])})",
             f"did you mean {close[0]!r}?" if close else "use a model of simlan_data/world/models.py",
         )
+
+
+def _placements(df: pl.DataFrame, p: Path, fidelity: str) -> list[Placement]:
+    """Keep the rows of ``fidelity`` as placements; refuse a row naming an unknown fidelity level."""
     out: list[Placement] = []
     for row in df.iter_rows(named=True):
         levels = frozenset((row["world_setups"] or "").split())
