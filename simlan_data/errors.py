@@ -62,3 +62,8 @@ class RecordingInputError(RecordingError):
 
 class RunError(SimlanError):
     """A run failed after its inputs were accepted."""
+
+
+class PluginError(RunError):
+    """An algorithm (built-in or plug-in) raised during a run: names its role, its name and the
+    simulated time. The run fails (exit 1); what was recorded up to then is finalized and kept."""

@@ -264,11 +264,6 @@ def test_an_exception_in_the_plugin_names_it_and_the_time(
     assert (run_dir / "recording" / "recording.mcap").exists()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="simlan_data/recording/writer.py RecordingWriter.__exit__ aborts on any exception (a PluginError "
-    "too): no summary, no metadata.yaml, RUNNING left, as after a crash",
-)
 def test_an_exception_in_the_plugin_leaves_a_finalized_recording(
     failing_run: tuple[subprocess.CompletedProcess, Path],
 ) -> None:
@@ -280,3 +275,4 @@ def test_an_exception_in_the_plugin_leaves_a_finalized_recording(
     with open(bag / "recording.mcap", "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None and summary.statistics.message_count > 0
+    assert not (run_dir / "RUNNING").exists(), "a finished recording needs no recovery marker"

@@ -24,7 +24,7 @@ from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from simlan_data.algorithms.roles import CONTEXTS, ROLES, missing_methods
-from simlan_data.errors import ConfigError, SimlanError
+from simlan_data.errors import ConfigError, PluginError, SimlanError
 
 ENTRY_POINT_GROUP = "simlan_data.algorithms"
 DEFAULTS = {  # the built-in algorithm of each role (registered like any other)
@@ -199,7 +199,8 @@ def check(spec: AlgorithmSpec, *, where: str) -> None:
             f"{spec.cls.__module__}.{spec.cls.__qualname__} is not a {spec.role}",
             where,
             f"its role is {declared!r}" if declared else "it declares no role",
-            f'set role = "{spec.role}" on the class, or select it for role {declared!r}',
+            f'set role = "{spec.role}" on the class'
+            + (f", or select it for role {declared!r}" if declared else ""),
         )
     if spec.config_class is None or not dataclasses.is_dataclass(spec.config_class):
         raise ConfigError(
@@ -250,10 +251,6 @@ def from_config(
     spec = resolve(role, name or recorded_name, where=where)
     values.update(overrides or {})
     return spec, spec.make_config(values, where=where)
-
-
-class PluginError(SimlanError):
-    """An algorithm raised during a run: names the role, the algorithm and the simulated time."""
 
 
 class Guarded:

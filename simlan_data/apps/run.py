@@ -28,7 +28,7 @@ from simlan_data.apps.cli import run_cli
 from simlan_data.config.schema import Config, register_configs
 from simlan_data.config.validation import to_config
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
-from simlan_data.errors import ConfigError, RunError, SimlanError
+from simlan_data.errors import ConfigError, PluginError, RunError, SimlanError
 from simlan_data.evaluation.localization_replay import recording_metrics
 from simlan_data.evaluation.replay import ReplayContext
 from simlan_data.evaluation.report import write_report
@@ -80,6 +80,10 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
 
     try:
         stats = sim.run(bag, progress=on_progress)
+    except PluginError as err:  # the recording was finished: no recovery needed
+        marker.unlink(missing_ok=True)
+        kept = f"the recording up to then is kept in {bag}" if bag.exists() else ""
+        raise RunError(err.what, err.where, err.why, "; ".join(x for x in (err.fix, kept) if x)) from err
     except SimlanError as err:
         if not bag.exists():  # refused before recording anything (a spawn pose in a shelf...)
             marker.unlink(missing_ok=True)

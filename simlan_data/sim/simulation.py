@@ -39,6 +39,7 @@ from simlan_data.config.algorithms import plain
 from simlan_data.config.faults import CameraFaults
 from simlan_data.config.schema import Config
 from simlan_data.constants import FORMAT_VERSION, NS_PER_S
+from simlan_data.errors import PluginError
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import messages as M
 from simlan_data.recording.cameras import camera_from_messages
@@ -129,6 +130,7 @@ class Simulation:
         scene = Scene.build(cfg, self.inputs)
         stats.renderer = scene.client.backend
         stats.layout_notes = list(scene.world.layout_conflicts)
+        failed: PluginError | None = None
         try:
             writer = (
                 RecordingWriter(
@@ -154,7 +156,10 @@ class Simulation:
                 # set up before the clock starts, like the scene (lookup tables take a second or two)
                 self.birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
                 wall0, cpu0, main0 = time.perf_counter(), time.process_time(), time.thread_time()
-                self._loop(scene, writer, stats, progress)
+                try:
+                    self._loop(scene, writer, stats, progress)
+                except PluginError as err:  # the recording up to the failure is finished and kept
+                    failed = err
                 stats.wall_s = time.perf_counter() - wall0
                 stats.main_cpu_s = time.thread_time() - main0
             stats.cpu_s = time.process_time() - cpu0  # after the writer drained its queue
@@ -164,6 +169,8 @@ class Simulation:
                 stats.recording_bytes = sum(f.stat().st_size for f in bag_path.iterdir() if f.is_file())
         finally:
             scene.close()
+        if failed is not None:
+            raise failed
         return stats
 
     def _stack(self, scene: Scene) -> GpssStack:
