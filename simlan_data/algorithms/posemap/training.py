@@ -162,13 +162,8 @@ def write_report(path: Path, metrics: dict[str, float], info: dict[str, Any]) ->
     path.write_text("\n".join(lines) + "\n")
 
 
-def train(
-    pm: PosemapConfig, run_dir: Path, *, seed: int = 0, config_yaml: str = "", progress: bool = True
-) -> dict[str, float]:
-    """Train ``pm.model`` on ``pm.dataset``; write model, metrics and report into ``run_dir``."""
-    data = read_dataset(pm.dataset)
-    spec = feature_spec(pm, data)
-    data = data.select_cameras(spec["cameras"])
+def _split(pm: PosemapConfig, data: PoseDataset) -> tuple[np.ndarray, dict[str, int]]:
+    """Split the samples into train, val and test by their ids; refuse a dataset too small to train and test."""
     split = split_of(data.sample_ids, val_fraction=pm.val_fraction, test_fraction=pm.test_fraction)
     sizes = {s: int((split == s).sum()) for s in ("train", "val", "test")}
     if sizes["train"] < 2 or sizes["test"] < 1:
@@ -178,6 +173,90 @@ def train(
             f"{len(data)} samples give {sizes['train']} to train on and {sizes['test']} to test",
             "generate more samples (posemap.samples)",
         )
+    return split, sizes
+
+
+def _model_info(
+    pm: PosemapConfig,
+    data: PoseDataset,
+    spec: dict[str, Any],
+    sizes: dict[str, int],
+    metrics: dict[str, float],
+    refiner: Refiner | None,
+    *,
+    seed: int,
+    config_yaml: str,
+) -> dict[str, Any]:
+    """Describe the trained model for its saved info: features, dataset, split, config, metrics, versions."""
+    return {
+        "model": pm.model,
+        "cameras": spec["cameras"],
+        "features": spec["features"],
+        "feature_spec": spec,
+        "dataset": str(Path(pm.dataset).resolve()),
+        "dataset_sha256": data.sha256,
+        "estimator": data.estimator,
+        "split_sizes": sizes,
+        "split": {
+            "by": "sample_id (splitmix64 hash)",
+            "val_fraction": pm.val_fraction,
+            "test_fraction": pm.test_fraction,
+        },
+        "joint_names": list(JOINT_NAMES),
+        "config": asdict(pm),
+        "refine": refiner.to_dict() if refiner is not None else None,
+        "config_yaml": config_yaml,
+        "seed": seed,
+        "metrics": {k: v for k, v in metrics.items() if ".joint." not in k},
+        "versions": _versions(),
+    }
+
+
+def _print_summary(
+    pm: PosemapConfig,
+    run_dir: Path,
+    data: PoseDataset,
+    spec: dict[str, Any],
+    sizes: dict[str, int],
+    metrics: dict[str, float],
+    refined: bool,
+    fit_s: float,
+) -> None:
+    """Print what was trained: data, test errors against the mean pose, worst joints, timing, where it lies."""
+    worst = sorted(JOINT_NAMES, key=lambda n: -metrics[f"posemap.joint.{n}.mae_rad"])[:3]
+    worst_text = ", ".join(f"{n} {metrics['posemap.joint.' + n + '.mae_rad']:.3f}" for n in worst)
+    print(
+        "\n".join(
+            [
+                f"simlan_data: posemap {pm.model} ({spec['features']} features, cameras {', '.join(spec['cameras'])}) trained",
+                f"  run directory  {run_dir}",
+                f"  data           {sizes['train']} train / {sizes['val']} val / {sizes['test']} test samples, {data.estimator}, sha256 {data.sha256[:12]}",
+                f"  test           MAE {metrics['posemap.mae_rad']:.4f} rad ({metrics['posemap.mae_deg']:.2f} deg), MSE {metrics['posemap.mse_rad2']:.4f} rad^2, MPJPE {metrics['posemap.mpjpe_m'] * 100:.1f} cm",
+                f"  mean pose      MAE {metrics['posemap.baseline.mean_pose.mae_rad']:.4f} rad (the baseline to beat)",
+                *(
+                    [
+                        f"  refine=fit     learned model alone MAE {metrics['posemap.learned.mae_rad']:.4f} rad; fit {metrics['posemap.refine.ms_per_sample']:.1f} ms/sample, {100 * metrics['posemap.refine.restarted']:.0f} % restarted"
+                    ]
+                    if refined
+                    else []
+                ),
+                f"  worst joints   {worst_text}",
+                f"  fit            {fit_s:.1f} s; inference {metrics['posemap.inference_us_per_sample']:.1f} us/sample (batch), {metrics['posemap.latency_ms']:.2f} ms one sample",
+                f"  model          {run_dir / MODEL_DIRNAME}  (report: {run_dir / REPORT_NAME})",
+            ]
+        ),
+        flush=True,
+    )
+
+
+def train(
+    pm: PosemapConfig, run_dir: Path, *, seed: int = 0, config_yaml: str = "", progress: bool = True
+) -> dict[str, float]:
+    """Train ``pm.model`` on ``pm.dataset``; write model, metrics and report into ``run_dir``."""
+    data = read_dataset(pm.dataset)
+    spec = feature_spec(pm, data)
+    data = data.select_cameras(spec["cameras"])
+    split, sizes = _split(pm, data)
     t0 = time.perf_counter()
     x = features_for(data.landmarks, spec)
     features_s = time.perf_counter() - t0
@@ -220,55 +299,11 @@ def train(
             "posemap.features": float(x.shape[1]),
         }
     )
-    info = {
-        "model": pm.model,
-        "cameras": spec["cameras"],
-        "features": spec["features"],
-        "feature_spec": spec,
-        "dataset": str(Path(pm.dataset).resolve()),
-        "dataset_sha256": data.sha256,
-        "estimator": data.estimator,
-        "split_sizes": sizes,
-        "split": {
-            "by": "sample_id (splitmix64 hash)",
-            "val_fraction": pm.val_fraction,
-            "test_fraction": pm.test_fraction,
-        },
-        "joint_names": list(JOINT_NAMES),
-        "config": asdict(pm),
-        "refine": refiner.to_dict() if refiner is not None else None,
-        "config_yaml": config_yaml,
-        "seed": seed,
-        "metrics": {k: v for k, v in metrics.items() if ".joint." not in k},
-        "versions": _versions(),
-    }
+    info = _model_info(pm, data, spec, sizes, metrics, refiner, seed=seed, config_yaml=config_yaml)
     mapper.save(run_dir / MODEL_DIRNAME, info)
     (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
     write_report(run_dir / REPORT_NAME, metrics, info)
-    worst = sorted(JOINT_NAMES, key=lambda n: -metrics[f"posemap.joint.{n}.mae_rad"])[:3]
-    worst_text = ", ".join(f"{n} {metrics['posemap.joint.' + n + '.mae_rad']:.3f}" for n in worst)
-    print(
-        "\n".join(
-            [
-                f"simlan_data: posemap {pm.model} ({spec['features']} features, cameras {', '.join(spec['cameras'])}) trained",
-                f"  run directory  {run_dir}",
-                f"  data           {sizes['train']} train / {sizes['val']} val / {sizes['test']} test samples, {data.estimator}, sha256 {data.sha256[:12]}",
-                f"  test           MAE {metrics['posemap.mae_rad']:.4f} rad ({metrics['posemap.mae_deg']:.2f} deg), MSE {metrics['posemap.mse_rad2']:.4f} rad^2, MPJPE {metrics['posemap.mpjpe_m'] * 100:.1f} cm",
-                f"  mean pose      MAE {metrics['posemap.baseline.mean_pose.mae_rad']:.4f} rad (the baseline to beat)",
-                *(
-                    [
-                        f"  refine=fit     learned model alone MAE {metrics['posemap.learned.mae_rad']:.4f} rad; fit {metrics['posemap.refine.ms_per_sample']:.1f} ms/sample, {100 * metrics['posemap.refine.restarted']:.0f} % restarted"
-                    ]
-                    if refiner is not None
-                    else []
-                ),
-                f"  worst joints   {worst_text}",
-                f"  fit            {fit_s:.1f} s; inference {metrics['posemap.inference_us_per_sample']:.1f} us/sample (batch), {metrics['posemap.latency_ms']:.2f} ms one sample",
-                f"  model          {run_dir / MODEL_DIRNAME}  (report: {run_dir / REPORT_NAME})",
-            ]
-        ),
-        flush=True,
-    )
+    _print_summary(pm, run_dir, data, spec, sizes, metrics, refiner is not None, fit_s)
     return metrics
 
 
