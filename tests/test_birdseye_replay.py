@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from conftest import run_cli
-from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec
+from simlan_data.algorithms.birdseye import CanvasSpec
+from simlan_data.algorithms.roles import StitcherContext
 from simlan_data.config.schema import WorldConfig
 from simlan_data.errors import ConfigError, RecordingInputError
 from simlan_data.evaluation.birdseye_metrics import GCP_HALF_PX, ground_control_points, locate_gcps
@@ -48,9 +49,10 @@ def test_live_topic_is_reproduced_bit_for_bit_by_replay(birdseye_run: Path) -> N
         live = list(reader.messages([schema.BIRDSEYE_IMAGE]))
         assert len(live) == 3  # t = 0, 0.2, 0.4 s
         assert live[0].msg.header.frame_id == schema.MAP_FRAME
-        cfg, _, _ = birdseye_settings(ctx)
+        settings = birdseye_settings(ctx)
+        cfg = settings.birdseye
         cams = [ctx.cameras[c] for c in ("163", "164")]
-        stitcher = BirdseyeStitcher(cams, cfg.canvas(), feather_m=cfg.feather_m)
+        stitcher = settings.stitcher.build(settings.stitcher_config, StitcherContext(cams, cfg.canvas()))
         frames: dict[int, dict[str, np.ndarray]] = {}
         topics = [f"/camera_{c}/image_raw/compressed" for c in ("163", "164")]
         for m in reader.messages(topics):
@@ -111,8 +113,11 @@ def test_replay_option_errors(birdseye_run: Path) -> None:
             ({"colour": False}, r"unknown birdseye option 'colour' in replay --set: known: x_m, y_m"),
             ({"x_m": "abc"}, r"invalid birdseye.x_m='abc' in replay --set: expected \[min, max\]"),
             ({"px_per_m": [1, 2]}, r"invalid birdseye.px_per_m=\[1, 2\] in replay --set: expected a number"),
-            ({"feather_m": 0}, r"invalid birdseye.feather_m=0"),
-            ({"feather_m": "wide"}, r"invalid birdseye option in replay --set: .*not supported"),
+            ({"feather_m": 0}, r"invalid algorithms.stitcher.feather_m=0 in replay --set: must be within"),
+            (
+                {"feather_m": "wide"},
+                r"invalid algorithms.stitcher.feather_m='wide' in replay --set: expected a number",
+            ),
         ]:
             with pytest.raises(ConfigError, match=match):
                 birdseye_settings(ReplayContext(reader, birdseye_run, options))

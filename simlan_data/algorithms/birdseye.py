@@ -271,6 +271,23 @@ def camera_footprint(
     return Footprint(camera.camera_id, rows, cols, map_x, map_y, good, density)
 
 
+def project_footprints(
+    footprints: Sequence[Footprint | None],
+    frames: Sequence[NDArray[np.uint8]],
+    *,
+    interpolation: int = cv2.INTER_LINEAR,
+) -> list[tuple[Footprint, NDArray[np.uint8]] | None]:
+    """Every camera's own projection onto its canvas window (None where it sees none of it)."""
+    out: list[tuple[Footprint, NDArray[np.uint8]] | None] = []
+    for fp, frame in zip(footprints, frames):
+        if fp is None:
+            out.append(None)
+            continue
+        img = cv2.remap(frame, fp.map_x, fp.map_y, interpolation, borderMode=cv2.BORDER_CONSTANT)
+        out.append((fp, cast(NDArray[np.uint8], img)))
+    return out
+
+
 def _smoothstep(x: NDArray) -> NDArray:
     x = np.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
@@ -485,14 +502,7 @@ class BirdseyeStitcher:
         self, frames: Sequence[NDArray[np.uint8]], *, interpolation: int = cv2.INTER_LINEAR
     ) -> list[tuple[Footprint, NDArray[np.uint8]] | None]:
         """Every camera's own projection onto its canvas window (for seam and per-camera metrics)."""
-        out: list[tuple[Footprint, NDArray[np.uint8]] | None] = []
-        for fp, frame in zip(self.footprints, frames):
-            if fp is None:
-                out.append(None)
-                continue
-            img = cv2.remap(frame, fp.map_x, fp.map_y, interpolation, borderMode=cv2.BORDER_CONSTANT)
-            out.append((fp, cast(NDArray[np.uint8], img)))
-        return out
+        return project_footprints(self.footprints, frames, interpolation=interpolation)
 
     @property
     def seam_fraction(self) -> float:

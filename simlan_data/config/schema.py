@@ -283,14 +283,17 @@ class RecordingConfig:
 
 @dataclass
 class BirdseyeConfig:
-    """The live bird's-eye view (``/birdseye/image``) and the canvas replays use by default."""
+    """The live bird's-eye view (``/birdseye/image``) and the canvas replays use by default.
+
+    The canvas (region, scale, plane) is what every stitcher fills and the metrics score; the
+    stitcher's own parameters are its config, ``algorithms.stitcher`` (e.g. ``feather_m``).
+    """
 
     rate_hz: float = 0.0  # 0: no live topic
     x_m: list[float] = field(default_factory=lambda: [-8.0, 34.0])
     y_m: list[float] = field(default_factory=lambda: [-10.0, 10.0])
     px_per_m: float = 50.0
     plane_z_m: float = 0.0
-    feather_m: float = 0.2
     jpeg_quality: int = 85
 
     def canvas(self, where: str = "config") -> CanvasSpec:
@@ -307,8 +310,6 @@ class BirdseyeConfig:
                 "must be within 0..100 Hz (0: off)",
                 "use e.g. birdseye.rate_hz=1",
             )
-        if not 0 < self.feather_m <= 5:
-            raise _bad("birdseye.feather_m", self.feather_m, "must be within (0, 5] m", "use 0.2")
         if not 1 <= self.jpeg_quality <= 100:
             raise _bad("birdseye.jpeg_quality", self.jpeg_quality, "must be within 1..100", "use 85")
         self.canvas()

@@ -27,7 +27,13 @@ import numpy as np
 from numpy.typing import NDArray
 from skimage.metrics import structural_similarity
 
-from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec, camera_footprint
+from simlan_data.algorithms.birdseye import (
+    BirdseyeStitcher,
+    CanvasSpec,
+    Footprint,
+    camera_footprint,
+    project_footprints,
+)
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.world.labels import SEMANTIC_CLASSES
 from simlan_data.world.layout import Placement
@@ -294,8 +300,27 @@ Window = tuple[slice, slice]
 FULL = (slice(None), slice(None))
 
 
+class CameraViews:
+    """Where each camera sees the canvas: its lookup table (footprint), and the canvas any camera
+    sees (``coverage``). The floor masks and seam error of a stitcher that does not expose its own
+    (``project_each`` and ``coverage``, as :class:`BirdseyeStitcher` does) come from these."""
+
+    def __init__(self, cameras: Sequence[CameraModel], spec: CanvasSpec) -> None:
+        self.footprints: list[Footprint | None] = [camera_footprint(c, spec) for c in cameras]
+        self.coverage = np.zeros((spec.height, spec.width), dtype=bool)
+        for fp in self.footprints:
+            if fp is not None:
+                self.coverage[fp.rows, fp.cols] |= fp.valid
+
+    def project_each(
+        self, frames: Sequence[NDArray[np.uint8]], *, interpolation: int = cv2.INTER_LINEAR
+    ) -> list[tuple[Footprint, NDArray[np.uint8]] | None]:
+        """Every camera's own projection onto its canvas window."""
+        return project_footprints(self.footprints, frames, interpolation=interpolation)
+
+
 def stitcher_projections(
-    stitcher: BirdseyeStitcher, frames: Sequence[NDArray[np.uint8]], *, nearest: bool = False
+    stitcher: BirdseyeStitcher | CameraViews, frames: Sequence[NDArray[np.uint8]], *, nearest: bool = False
 ) -> list[tuple[Window, NDArray[np.uint8], NDArray[np.bool_]]]:
     """Every camera's own projection with its window and coverage (for masks and seam error)."""
     interp = cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR

@@ -2,8 +2,11 @@
 
     python -m simlan_data.replay RECORDING --out DIR --algorithms birdseye [--set KEY=VALUE ...]
 
-Options (``--set``): ``x_m=[-8,34]``, ``y_m=[-10,10]``, ``px_per_m=50``, ``plane_z_m=0``,
-``feather_m=0.2`` (default: the recording's ``birdseye`` config section, else these);
+Options (``--set``): the canvas ``x_m=[-8,34]``, ``y_m=[-10,10]``, ``px_per_m=50``, ``plane_z_m=0``
+(default: the recording's ``birdseye`` config section, else these); ``stitcher=NAME`` (a registered
+name or module:Class; default: the recorded ``algorithms.stitcher``, for recordings made before it
+the built-in ``gpss`` with their ``birdseye.feather_m``) and the stitcher's own config keys, e.g.
+``feather_m=0.2`` of the built-in (default: the recorded values of the recorded stitcher);
 ``eval_frames=5`` (frames scored against ground truth, spread over the recording; 0 = none);
 ``ground_truth=true`` (build the recorded world in PyBullet for the orthographic ground truth);
 ``drop_cameras=[163]``, ``yaw_error_deg=1 yaw_error_cameras=[163]`` (injected faults, see
@@ -12,7 +15,7 @@ Options (``--set``): ``x_m=[-8,34]``, ``y_m=[-10,10]``, ``px_per_m=50``, ``plane
 Data flow::
 
     colour (+ semantic) messages, grouped by stamp --decode--> frames of all cameras
-        --BirdseyeStitcher--> canvas (timed: canvases/s)
+        --the stitcher (registry, guarded)--> canvas (timed: canvases/s)
         labelled frames (eval_frames of them) --+ SimlanBirdseye (baseline, same frames)
                                                 +--QualityEvaluator vs orthographic ground truth
     --> birdseye.* metrics, DIR/birdseye_report.md, DIR/birdseye_report.png, DIR/birdseye_last.png
@@ -20,9 +23,11 @@ Data flow::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
 
@@ -31,13 +36,17 @@ import numpy as np
 from numpy.typing import NDArray
 from omegaconf import OmegaConf
 
-from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec
+from simlan_data.algorithms import registry
+from simlan_data.algorithms.birdseye import CanvasSpec
 from simlan_data.algorithms.birdseye_simlan import SimlanBirdseye
+from simlan_data.algorithms.birdseye_stitcher import GpssStitcher
+from simlan_data.algorithms.roles import StitcherContext
 from simlan_data.config.faults import CAMERA_FAULT_OPTIONS
 from simlan_data.config.schema import BirdseyeConfig, WorldConfig
 from simlan_data.errors import ConfigError, RecordingInputError, SimlanError
 from simlan_data.evaluation.birdseye_metrics import (
     FULL,
+    CameraViews,
     QualityEvaluator,
     ground_control_points,
     stitcher_projections,
@@ -50,8 +59,11 @@ from simlan_data.world.layout import load_layout
 REPORT_MD = "birdseye_report.md"
 REPORT_PNG = "birdseye_report.png"
 LAST_PNG = "birdseye_last.png"
-CANVAS_OPTIONS = ("x_m", "y_m", "px_per_m", "plane_z_m", "feather_m")
-OPTIONS = (*CANVAS_OPTIONS, "eval_frames", "ground_truth", *CAMERA_FAULT_OPTIONS)
+CANVAS_OPTIONS = ("x_m", "y_m", "px_per_m", "plane_z_m")
+# replay options that are not the stitcher's config: the canvas, what to score, which stitcher, faults
+OPTIONS = (*CANVAS_OPTIONS, "eval_frames", "ground_truth", "stitcher", *CAMERA_FAULT_OPTIONS)
+# recordings made before the stitcher was selectable kept the built-in's keys in the birdseye section
+LEGACY_KEYS = ("feather_m",)
 _TOPIC = re.compile(r"^/camera_([^/]+)/(image_raw|semantic/image_raw)(/compressed)?$")
 
 
@@ -63,9 +75,50 @@ def _decode(m: Message) -> NDArray[np.uint8]:
     return np.asarray(image, dtype=np.uint8)
 
 
-def birdseye_settings(ctx: ReplayContext) -> tuple[BirdseyeConfig, int, bool]:
-    """The canvas config (recording's section, then --set options) and evaluation options."""
-    check_options(ctx.options, OPTIONS, "birdseye", "replay --set", "e.g. --set px_per_m=25")
+@dataclass(frozen=True)
+class BirdseyeSettings:
+    """What the replay stitches with and how it scores."""
+
+    birdseye: BirdseyeConfig  # the canvas (and the recorded jpeg_quality)
+    stitcher: registry.AlgorithmSpec
+    stitcher_config: Any
+    eval_frames: int
+    ground_truth: bool
+
+
+def selected_stitcher(
+    config: dict[str, Any], options: dict[str, Any] | None = None
+) -> tuple[registry.AlgorithmSpec, Any]:
+    """The stitcher and its config: the recording's, or ``options["stitcher"]`` (a registered name
+    or module:Class), with the options that are not the replay's own as its config values.
+
+    Raises:
+        ConfigError: an unknown name or option, a value its config rejects.
+    """
+    options = dict(options or {})
+    algorithms = dict(config.get("algorithms") or {})
+    if not algorithms.get("stitcher"):  # an older recording: its stitcher was the built-in one
+        legacy = {k: v for k, v in (config.get("birdseye") or {}).items() if k in LEGACY_KEYS}
+        algorithms["stitcher"] = {registry.NAME_KEY: registry.DEFAULTS["stitcher"], **legacy}
+        config = {**config, "algorithms": algorithms}
+    name = options.get("stitcher")
+    name = registry.selection(config, "stitcher")[0] if name is None else str(name)
+    spec = registry.resolve("stitcher", name, where="replay --set")
+    own = [f.name for f in dataclasses.fields(spec.config_class) if f.init]
+    check_options(options, (*OPTIONS, *own), "birdseye", "replay --set", "e.g. --set px_per_m=25")
+    overrides = {k: v for k, v in options.items() if k not in OPTIONS}
+    try:
+        return registry.from_config(config, "stitcher", name=name, overrides=overrides, where="replay --set")
+    except ConfigError as err:
+        if err.where != "config":
+            raise
+        raise ConfigError(err.what, "replay --set", err.why, err.fix) from None
+
+
+def birdseye_settings(ctx: ReplayContext) -> BirdseyeSettings:
+    """The canvas config (recording's section, then --set options), the stitcher and its config
+    (see :func:`selected_stitcher`) and the evaluation options."""
+    stitcher, stitcher_config = selected_stitcher(ctx.config, ctx.options)
     recorded = dict(ctx.config.get("birdseye") or {})
     merged = {**{k: v for k, v in recorded.items() if k in BirdseyeConfig.__dataclass_fields__}}
     merged.update({k: ctx.options[k] for k in CANVAS_OPTIONS if k in ctx.options})
@@ -86,7 +139,9 @@ def birdseye_settings(ctx: ReplayContext) -> tuple[BirdseyeConfig, int, bool]:
             "must be an integer within 0..1000",
             "use e.g. 5",
         )
-    return cfg, eval_frames, bool(ctx.options.get("ground_truth", True))
+    return BirdseyeSettings(
+        cfg, stitcher, stitcher_config, eval_frames, bool(ctx.options.get("ground_truth", True))
+    )
 
 
 def _ground_truth(ctx: ReplayContext, spec: CanvasSpec) -> tuple[NDArray[np.uint8], NDArray[np.uint8], Any]:
@@ -118,7 +173,8 @@ def _ground_truth(ctx: ReplayContext, spec: CanvasSpec) -> tuple[NDArray[np.uint
 @register("birdseye")
 def birdseye(ctx: ReplayContext) -> dict[str, float]:
     """Stitch every frame of the recording, score some against ground truth, write a report."""
-    cfg, eval_frames, with_truth = birdseye_settings(ctx)
+    settings = birdseye_settings(ctx)
+    cfg, eval_frames, with_truth = settings.birdseye, settings.eval_frames, settings.ground_truth
     spec = cfg.canvas(where="replay --set")
     cams = dict(sorted(ctx.believed_cameras.items(), key=lambda kv: (len(kv[0]), kv[0])))
     if not cams:
@@ -133,7 +189,13 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
             (colour if found.group(2) == "image_raw" else semantic)[topic] = found.group(1)
     ids = [c for c in cams if c in colour.values()]
     cameras = [cams[c] for c in ids]
-    stitcher = BirdseyeStitcher(cameras, spec, feather_m=cfg.feather_m)
+    algorithm = settings.stitcher
+    stitcher = registry.Guarded(
+        algorithm.build(settings.stitcher_config, StitcherContext(cameras, spec), where="replay"), algorithm
+    )
+    # where each camera sees the canvas: the stitcher's own tables if it has them (the built-in)
+    own = callable(getattr(stitcher, "project_each", None)) and hasattr(stitcher, "coverage")
+    views = stitcher if own else CameraViews(cameras, spec)
     labelled_count = min((ctx.reader.topics[t].count for t in semantic), default=0)
     if len(semantic) < len(ids):
         labelled_count = 0
@@ -174,10 +236,11 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
     metrics: dict[str, float] = {
         "birdseye.canvases": float(n_canvases),
         "birdseye.canvases_per_s": n_canvases / stitch_s if stitch_s > 0 else 0.0,
-        "birdseye.coverage": float(stitcher.coverage.mean()),
-        "birdseye.seam_fraction": stitcher.seam_fraction,
+        "birdseye.coverage": float(views.coverage.mean()),
         "birdseye.cameras": float(len(cameras)),
     }
+    if isinstance(getattr(stitcher, "seam_fraction", None), float):  # a blending stitcher's
+        metrics["birdseye.seam_fraction"] = stitcher.seam_fraction
     summary: dict[str, dict[str, float]] = {}
     truth = None
     if with_truth and evaluated and spec.plane_z_m == 0.0:
@@ -186,8 +249,8 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
         simlan = SimlanBirdseye(cameras, spec)
         evaluator = QualityEvaluator(spec, truth_rgb, truth_labels, ground_control_points(layout, spec))
         for frames, labels, canvas in evaluated:
-            evaluator.begin_frame(stitcher_projections(stitcher, labels, nearest=True))
-            evaluator.add("ours", canvas, stitcher.coverage, stitcher_projections(stitcher, frames))
+            evaluator.begin_frame(stitcher_projections(views, labels, nearest=True))
+            evaluator.add("ours", canvas, views.coverage, stitcher_projections(views, frames))
             per_cam = [(FULL, img, inside) for img, inside in zip(simlan.project_each(frames), simlan.inside)]
             evaluator.add("simlan", simlan.stitch(frames), simlan.coverage, per_cam)
         summary = evaluator.summary()
@@ -203,7 +266,7 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
     write_report(
         ctx.out_dir,
         spec,
-        cfg,
+        settings,
         metrics,
         summary,
         last,
@@ -228,7 +291,7 @@ def _panel(image: NDArray[np.uint8], title: str, width: int) -> NDArray[np.uint8
 def write_report(
     out_dir: Path,
     spec: CanvasSpec,
-    cfg: BirdseyeConfig,
+    settings: BirdseyeSettings,
     metrics: dict[str, float],
     summary: dict[str, dict[str, float]],
     last: NDArray[np.uint8] | None,
@@ -238,16 +301,25 @@ def write_report(
     cameras: list[Any],
 ) -> Path:
     """Markdown report with a PNG of ours, SIMLAN's method and the ground truth (one frame)."""
+    algorithm = settings.stitcher
+    values = ", ".join(f"{k}={v}" for k, v in dataclasses.asdict(settings.stitcher_config).items())
+    ours = (
+        "ours (distortion-aware, colour, best-view blend)"
+        if algorithm.cls is GpssStitcher and getattr(settings.stitcher_config, "distort", True)
+        else f"ours ({algorithm.name})"
+    )
+    seams = metrics.get("birdseye.seam_fraction")
     lines = [
         "# Bird's-eye view report",
         "",
         f"Canvas x {spec.x_m[0]:g}..{spec.x_m[1]:g} m, y {spec.y_m[0]:g}..{spec.y_m[1]:g} m at "
         f"{spec.px_per_m:g} px/m ({spec.width}x{spec.height}), plane z = {spec.plane_z_m:g} m, "
-        f"feather {cfg.feather_m:g} m; {len(cameras)} cameras ({', '.join(c.camera_id for c in cameras)}).",
+        f"stitcher {algorithm.name} ({values or 'no options'}); "
+        f"{len(cameras)} cameras ({', '.join(c.camera_id for c in cameras)}).",
         "",
         f"Stitched {int(metrics['birdseye.canvases'])} canvases at {metrics['birdseye.canvases_per_s']:.1f} canvases/s "
-        f"(stitching only, decoded frames in memory); coverage {100 * metrics['birdseye.coverage']:.1f} %, "
-        f"{100 * metrics['birdseye.seam_fraction']:.1f} % of it blended from two or more cameras.",
+        f"(stitching only, decoded frames in memory); coverage {100 * metrics['birdseye.coverage']:.1f} %"
+        + (f", {100 * seams:.1f} % of it blended from two or more cameras." if seams is not None else "."),
         "",
     ]
     if last is not None:
@@ -264,7 +336,7 @@ def write_report(
             f"({100 * metrics['birdseye.floor_fraction']:.1f} % of the canvas). Ground control points: "
             "floor-slab joint crossings and floor-line ends, located by correlation within +-2 m.",
             "",
-            "| | ours (distortion-aware, colour, best-view blend) | SIMLAN's method (pinhole, grey, mean of all cameras) |",
+            f"| | {ours} | SIMLAN's method (pinhole, grey, mean of all cameras) |",
             "| --- | --- | --- |",
             f"| PSNR on floor pixels, grey (dB) | {o['psnr_grey_db']:.2f} | {s['psnr_grey_db']:.2f} |",
             f"| PSNR on floor pixels, colour (dB) | {o['psnr_db']:.2f} | - (grey only) |",

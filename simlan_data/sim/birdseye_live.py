@@ -2,13 +2,14 @@
 
 Camera tick (``Simulation``)::
 
-    rendered frames of all cameras --BirdseyeStitcher--> canvas --JPEG on an encoder thread-->
-        /birdseye/image (sensor_msgs/CompressedImage, frame ``map``)
+    rendered frames of all cameras --stitcher (algorithms.stitcher)--> canvas --JPEG on an
+        encoder thread--> /birdseye/image (sensor_msgs/CompressedImage, frame ``map``)
 
-The stitcher is built from the cameras exactly as a replay rebuilds them from the recording
-(camera_info + /tf_static), so replaying a recording whose colour images are lossless reproduces
-the live canvas bit for bit. When no camera image changed since the last canvas, its encoded
-message is reused with a new stamp.
+The stitcher is the one ``algorithms/stitcher`` selects (the built-in ``gpss`` by default), built
+through the registry from its own config and a :class:`StitcherContext`: the cameras exactly as a
+replay rebuilds them from the recording (camera_info + /tf_static) and the ``birdseye`` canvas. So
+replaying a recording whose colour images are lossless reproduces the live canvas bit for bit.
+When no camera image changed since the last canvas, its encoded message is reused with a new stamp.
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from simlan_data.algorithms.birdseye import BirdseyeStitcher
+from simlan_data.algorithms import registry
+from simlan_data.algorithms.roles import StitcherContext
+from simlan_data.config.algorithms import plain
 from simlan_data.config.schema import Config
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import messages as M
@@ -39,6 +42,19 @@ def cameras_as_recorded(cameras: Sequence[CameraModel]) -> list[CameraModel]:
     return out
 
 
+def build_stitcher(cfg: Config, cameras: Sequence[CameraModel]) -> registry.Guarded:
+    """The selected stitcher (``algorithms.stitcher``) on the ``birdseye`` canvas, guarded: an
+    exception inside it names it and the simulated time (exit 1)."""
+    selected = cfg.algorithms.stitcher
+    if selected is None:  # a config composed without the algorithms/stitcher default: the built-in
+        spec, config = registry.from_config(None, "stitcher", where="config algorithms.stitcher")
+    else:
+        spec = registry.resolve("stitcher", selected.name)
+        config = spec.make_config(plain(selected), where="config algorithms.stitcher")
+    context = StitcherContext(cameras_as_recorded(cameras), cfg.birdseye.canvas())
+    return registry.Guarded(spec.build(config, context), spec)
+
+
 def birdseye_topic() -> schema.Topic:
     return next(t for t in schema.GLOBAL_TOPICS if t.name == schema.BIRDSEYE_IMAGE)
 
@@ -51,9 +67,7 @@ class BirdseyeRecorder:
         self.writer = writer
         self._encode = RgbStream("jpeg", jpeg_quality=bcfg.jpeg_quality)  # only changed rows again
         self.every = round(cfg.cameras.rate_hz / bcfg.rate_hz)
-        self.stitcher = BirdseyeStitcher(
-            cameras_as_recorded(cameras), bcfg.canvas(), feather_m=bcfg.feather_m
-        )
+        self.stitcher = build_stitcher(cfg, cameras)
         self.topic = birdseye_topic()
         self._last: Any = None
         self.canvases = 0
@@ -74,7 +88,7 @@ class BirdseyeRecorder:
             self.writer.write_pending(self.topic, stamp_ns, _Restamped(self._last, stamp_ns))
             return
         t0 = time.perf_counter()
-        canvas = self.stitcher.stitch([im.rgb for im in images])  # type: ignore[misc]
+        canvas = self.stitcher.stitch([im.rgb for im in images])
         self.stitch_wall_s += time.perf_counter() - t0
         self.canvases += 1
         encode = self._encode
