@@ -1,6 +1,6 @@
 """Benchmark of issue 20 (open platform): the built-ins unchanged by the plug-in seam, ABA.
 
-    python benchmarks/platform.py [--old COMMIT] [--duration-s S] [--pairs N] [--json FILE]
+    python benchmarks/plugin_seam.py [--old COMMIT] [--duration-s S] [--pairs N] [--json FILE]
 
 Runs the default scenario (``python -m simlan_data.run duration_s=S``) with the code of an old
 commit (a ``git worktree`` put first on PYTHONPATH) and with this checkout, alternately
