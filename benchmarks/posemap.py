@@ -12,7 +12,7 @@ does what is missing):
 2. models on each: our re-implementation of SIMLAN's single-camera MLP (camera 500, x, y, z,
    hidden [504, 476, 479]), gradient boosting on one camera (AutoGluon's stand-in), and the
    multi-view fusion MLP on cameras 500-503, alone and followed by the kinematic fit
-   (``posemap.refine=fit``); the fit's information bound (started from and pulled towards the
+   (``algorithms.posemap.refine=fit``); the fit's information bound (started from and pulled towards the
    true joints: what no estimate from these landmarks can beat by much);
 3. prints markdown for BENCHMARKS.md (SIMLAN's reported 0.2465 rad AutoGluon and 0.359 rad MLP
    beside ours) and the raw JSON. Accuracy figures do not depend on load; timed ones do.
@@ -55,7 +55,7 @@ MODELS = {
             "posemap.cameras=[500]",
             "posemap.epochs=12",
             "posemap.batch_size=512",
-            "posemap.refine=none",
+            "algorithms.posemap.refine=none",
         ],
         "SIMLAN's MLP re-implemented: camera 500, x, y, z, [504, 476, 479], dropout 0.1, Adam, MSE",
     ),
@@ -67,17 +67,17 @@ MODELS = {
             "posemap.gbm_iterations=100",
             "posemap.loss=mse",
             "posemap.threads=1",
-            "posemap.refine=none",
+            "algorithms.posemap.refine=none",
         ],
         "gradient boosting per joint, camera 500 (AutoGluon's stand-in)",
     ),
     "fusion": (
-        [*FUSION, "posemap.refine=none"],
+        [*FUSION, "algorithms.posemap.refine=none"],
         "multi-view fusion MLP (L1), cameras 500-503, rig features, 2 x 256, learned alone",
     ),
     "fusion_fit": (
-        [*FUSION, "posemap.refine=fit"],
-        "the same fusion MLP + kinematic fit to all 4 cameras (posemap.refine=fit)",
+        [*FUSION, "algorithms.posemap.refine=fit"],
+        "the same fusion MLP + kinematic fit to all 4 cameras (algorithms.posemap.refine=fit)",
     ),
 }
 

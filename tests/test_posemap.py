@@ -257,7 +257,7 @@ def test_drive_replays_landmarks_through_the_model(trained: tuple[Path, Path], t
     proc = run_cli(
         "experiment=posemap_drive",
         f"posemap.drive={ds}",
-        f"posemap.drive_model={run}",
+        f"algorithms.posemap.model={run}",
         "duration_s=1.0",
         "world.fidelity=empty",
         "cameras.ids=[500]",
@@ -304,7 +304,7 @@ def test_motion_run_records_a_landmark_stream_the_drive_can_replay(
     proc = run_cli(
         "experiment=posemap_drive",
         f"posemap.drive={tmp_path / 'motion'}",
-        f"posemap.drive_model={run}",
+        f"algorithms.posemap.model={run}",
         "duration_s=1.0",
         *common,
         f"hydra.run.dir={tmp_path / 'drive'}",
@@ -369,9 +369,9 @@ def test_empty_dataset_is_one_error_line(tmp_path: Path) -> None:
             ["experiment=posemap_dataset", "posemap.estimator=openpose"],
             "invalid posemap.estimator='openpose'",
         ),
-        (["experiment=posemap_drive", "posemap.drive=/no/such/dir"], "invalid posemap.drive_model=''"),
+        (["experiment=posemap_drive", "posemap.drive=/no/such/dir"], "invalid algorithms.posemap.model=''"),
         (
-            ["experiment=posemap_drive", "posemap.drive=/tmp", "posemap.drive_model=/no/model"],
+            ["experiment=posemap_drive", "posemap.drive=/tmp", "algorithms.posemap.model=/no/model"],
             "model not found",
         ),
         (["experiment=posemap_motion", "posemap.motion=[no_such_motion]"], "motion file not found"),
@@ -415,14 +415,24 @@ def test_fusion_beats_simlans_single_camera_mlp_on_the_same_data(tmp_path: Path)
     assert proc.returncode == 0, proc.stderr
     maes = {}
     for name, overrides in (
-        ("simlan_mlp", ["posemap.model=mlp", "posemap.cameras=[500]", "posemap.refine=none"]),
+        ("simlan_mlp", ["posemap.model=mlp", "posemap.cameras=[500]", "algorithms.posemap.refine=none"]),
         (
             "fusion",
-            ["posemap.model=fusion", "posemap.width=512", "posemap.dropout=0.0", "posemap.refine=none"],
+            [
+                "posemap.model=fusion",
+                "posemap.width=512",
+                "posemap.dropout=0.0",
+                "algorithms.posemap.refine=none",
+            ],
         ),
         (
             "fusion_fit",
-            ["posemap.model=fusion", "posemap.width=512", "posemap.dropout=0.0", "posemap.refine=fit"],
+            [
+                "posemap.model=fusion",
+                "posemap.width=512",
+                "posemap.dropout=0.0",
+                "algorithms.posemap.refine=fit",
+            ],
         ),
     ):
         run = tmp_path / name

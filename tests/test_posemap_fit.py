@@ -152,7 +152,8 @@ def test_training_with_refine_beats_the_learned_model_alone(trained: tuple[Path,
     assert metrics["posemap.mae_rad"] < 0.75 * metrics["posemap.learned.mae_rad"], metrics
     assert metrics["posemap.mpjpe_m"] < 0.5 * metrics["posemap.baseline.mean_pose.mpjpe_m"]
     info = json.loads((run / "model" / "model.json").read_text())
-    assert info["config"]["refine"] == "fit" and len(info["refine"]["prior_sigma"]) == S.NUM_JOINTS
+    # (algorithms.posemap.refine=fit: the fit is saved with the model)
+    assert info["refine"] is not None and len(info["refine"]["prior_sigma"]) == S.NUM_JOINTS
     # the saved model refines the same way when loaded (the drive and the replay use this path)
     data = read_dataset(ds)
     te = np.flatnonzero(split_of(data.sample_ids, val_fraction=0.1, test_fraction=0.15) == "test")[:12]
@@ -163,9 +164,9 @@ def test_training_with_refine_beats_the_learned_model_alone(trained: tuple[Path,
 @pytest.mark.parametrize(
     ("override", "expected"),
     [
-        ("posemap.refine=icp", "invalid posemap.refine='icp'"),
-        ("posemap.refine_starts=0", "invalid posemap.refine_starts=0"),
-        ("posemap.refine_iterations=0", "invalid posemap.refine_iterations=0"),
+        ("algorithms.posemap.refine=icp", "invalid algorithms.posemap.refine='icp'"),
+        ("algorithms.posemap.refine_starts=0", "invalid algorithms.posemap.refine_starts=0"),
+        ("algorithms.posemap.refine_iterations=0", "invalid algorithms.posemap.refine_iterations=0"),
     ],
 )
 def test_bad_refine_config_is_one_line_and_exit_2(tmp_path: Path, override: str, expected: str) -> None:

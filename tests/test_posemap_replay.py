@@ -143,7 +143,7 @@ def _broken_weights(_: dict, directory: Path) -> None:
     ("recording", "options", "expected"),
     [
         ("golden", ["model={model}"], "recording has no landmark topics in .*: no /camera_<id>/pose_landmarks"),
-        ("motion", [], "posemap replay needs a model in --set model=...: no trained pose mapper given"),
+        ("motion", [], "invalid posemap replay option model='' in config: no trained pose mapper given"),
         ("motion", ["model=/no/such/model"], "model not found in posemap replay option model=/no/such/model"),
         ("motion", ["model={broken}"], "model unreadable in posemap replay option model=.*model_copy: "),
         ("motion", ["model={moved}"], "model's cameras do not match the recording's in .*: camera 501 stands 0.500 m"),

@@ -222,8 +222,10 @@ def execute_posemap(cfg: Config, run_dir: Path, *, config_yaml: str) -> float:
         metrics = generate_dataset(cfg, run_dir, progress=cfg.progress)
         return metrics["posemap.dataset.samples_per_s"]
     from simlan_data.algorithms.posemap.training import train_from_config
+    from simlan_data.sim.posemap_drive import trained_mapper_params
 
-    metrics = train_from_config(cfg.posemap, run_dir, seed=cfg.seed, config_yaml=config_yaml)
+    fit = trained_mapper_params(cfg)  # the built-in mapper's refine and fit parameters
+    metrics = train_from_config(cfg.posemap, fit, run_dir, seed=cfg.seed, config_yaml=config_yaml)
     return metrics["posemap.val.mae_rad"]
 
 

@@ -1,29 +1,41 @@
-"""Replay a recording's landmark stream through a trained pose mapper: ``--algorithms posemap``.
+"""Replay a recording's landmark stream through a pose mapper: ``--algorithms posemap``.
 
     python -m simlan_data.replay RECORDING --out DIR --algorithms posemap --set model=TRAIN_RUN
+    python -m simlan_data.replay RECORDING --out DIR --algorithms posemap --set posemap=my_pkg.pm:MyMapper
 
 Data flow::
 
-    /camera_<id>/pose_landmarks of the model's cameras --> frames (F, C, 33, 4) by stamp
+    /camera_<id>/pose_landmarks of the mapper's cameras --> frames (F, C, 33, 4) by stamp
         (position: where the person's support base stood, from /ground_truth/poses)
-        --> TrainedMapper (features + MLP / boosting) --> predicted joints (F, 47)
+        --> the pose mapper (the recording's algorithms.posemap, built through the registry as
+            the live drive builds it; the built-in ``trained``: features + MLP / boosting, then
+            the kinematic fit) --> predicted joints (F, 47)
     /<ns>/joint_states at the same stamps (the targets the humanoid was posed with) = truth
         --> replay.posemap.* metrics (gpss/posemap/metrics.py), posemap_joints.parquet (per
             joint), posemap_frames.parquet (per frame: errors, predicted and true joints)
 
 Options (``--set KEY=VALUE``; in a suite, ``replay: {posemap: {...}}``):
 
-- ``model`` (required): a training run directory or its ``model/``;
+- ``posemap``: another pose mapper, a registered name or ``module:Class`` (default: the
+  recording's ``algorithms.posemap``; recordings made before the ``algorithms`` section: the
+  built-in ``trained`` with the model ``posemap.drive_model``);
+- any key of the mapper's config (default: the recording's values when the mapper is the recorded
+  one, else its defaults), for the built-in ``trained``: ``model`` (a training run directory or its
+  ``model/``; a recording that drove no model has none: give one), ``refine``,
+  ``refine_iterations``, ``refine_starts``;
 - ``namespace``: the posed humanoid (default: the recording's ``posemap.namespace``);
 - ``position``: ``recorded`` (default: the humanoid's recorded base pose), ``model`` (where the
   training data's humanoid stood) or ``[x, y, yaw]``.
 
-The model's cameras must be recorded with landmarks and calibrated as the model was trained
-(centre within 5 cm, orientation within 1 degree, normalised intrinsics within 1 %).
+The mapper's cameras (its ``cameras``, else every camera with landmarks) must be recorded with
+landmarks and, where the mapper names their ``calibrations`` (the built-in: as the model was
+trained), calibrated so (centre within 5 cm, orientation within 1 degree, normalised intrinsics
+within 1 %).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -31,16 +43,23 @@ import numpy as np
 import polars as pl
 from scipy.spatial.transform import Rotation
 
+from simlan_data.algorithms import registry
 from simlan_data.algorithms.posemap.metrics import joint_errors, mpjpe, per_joint
-from simlan_data.algorithms.posemap.training import TrainedMapper
+from simlan_data.algorithms.roles import PosemapContext
+from simlan_data.algorithms.trained_posemap import WHERE_KEY, camera_ids
 from simlan_data.errors import ConfigError, RecordingInputError
 from simlan_data.evaluation.replay import ReplayContext, check_options, register
 from simlan_data.geometry.camera import CameraModel
+from simlan_data.sim.posemap_drive import check_targets
 from simlan_data.sim.posemap_inputs import base_pose, landmark_cameras, read_landmark_stream
 from simlan_data.world.skeleton import JOINT_NAMES, NUM_JOINTS, landmark_positions
 
 PREFIX = "replay.posemap"
-OPTIONS = ("model", "namespace", "position")
+# replay options that are not the pose mapper's config: which mapper, whose joints, where it stood
+REPLAY_OPTIONS = ("posemap", "namespace", "position")
+# recordings made before the ``algorithms`` section named the built-in's model here
+LEGACY_SECTION, LEGACY_MODEL_KEY = "posemap", "drive_model"
+WHERE = "posemap replay option "
 JOINTS_FILE = "posemap_joints.parquet"
 FRAMES_FILE = "posemap_frames.parquet"
 MAX_CENTRE_M = 0.05
@@ -48,17 +67,31 @@ MAX_ANGLE_DEG = 1.0
 MAX_INTRINSICS_REL = 0.01
 
 
-def _options(ctx: ReplayContext) -> dict[str, Any]:
-    check_options(ctx.options, OPTIONS, "posemap replay", "--set", "fix the spelling")
-    model = ctx.options.get("model")
-    if not isinstance(model, str) or not model:
-        raise ConfigError(
-            "posemap replay needs a model",
-            "--set model=...",
-            "no trained pose mapper given",
-            "give a training run directory: --set model=<run>/model (python -m simlan_data.run experiment=posemap_train ...)",
-        )
-    return dict(ctx.options)
+def selected_mapper(
+    config: dict[str, Any], options: dict[str, Any] | None = None
+) -> tuple[registry.AlgorithmSpec, Any]:
+    """The pose mapper and its config: the recording's, or ``options["posemap"]`` (a registered
+    name or module:Class); the options that are not replay options are its config values.
+
+    Raises:
+        ConfigError: an unknown name or option, a value its config rejects.
+    """
+    options = dict(options or {})
+    if "algorithms" not in config:  # an older recording: the built-in, driven by posemap.drive_model
+        model = (config.get(LEGACY_SECTION) or {}).get(LEGACY_MODEL_KEY) or ""
+        config = {**config, "algorithms": {"posemap": {"name": registry.DEFAULTS["posemap"], "model": model}}}
+    name = options.get("posemap")
+    spec = registry.resolve(
+        "posemap",
+        registry.selection(config, "posemap")[0] if name is None else str(name),
+        where="replay --set",
+    )
+    known = (*REPLAY_OPTIONS, *(f.name for f in dataclasses.fields(spec.config_class) if f.init))
+    check_options(options, known, "posemap replay", "--set", "fix the spelling")
+    overrides = {k: v for k, v in options.items() if k not in REPLAY_OPTIONS}
+    return registry.from_config(
+        config, "posemap", name=None if name is None else str(name), overrides=overrides, where="replay --set"
+    )
 
 
 def _normalised_intrinsics(cam: CameraModel) -> np.ndarray:
@@ -87,8 +120,8 @@ def camera_mismatch(trained: dict[str, Any], recorded: CameraModel) -> str:
     return ""
 
 
-def check_cameras(mapper: TrainedMapper, ctx: ReplayContext, where: str) -> None:
-    """The recording has landmarks of every camera the model reads, calibrated as in training.
+def check_cameras(mapper: Any, cameras: list[str], ctx: ReplayContext, where: str) -> None:
+    """The recording has landmarks of every camera the mapper reads, calibrated as it assumes.
 
     Raises:
         RecordingInputError: no landmark topics at all.
@@ -102,17 +135,17 @@ def check_cameras(mapper: TrainedMapper, ctx: ReplayContext, where: str) -> None
             "no /camera_<id>/pose_landmarks: nothing for a pose mapper to read",
             "record with posemap.landmarks_rate_hz > 0 (experiment=posemap_motion)",
         )
-    missing = [c for c in mapper.cameras if c not in have]
+    missing = [c for c in cameras if c not in have]
     if missing:
         raise ConfigError(
             "model's cameras do not match the recording's",
             where,
-            f"the model reads cameras {', '.join(mapper.cameras)}; the recording has landmarks of {', '.join(have)}",
+            f"the model reads cameras {', '.join(cameras)}; the recording has landmarks of {', '.join(have)}",
             "give a model trained on the recording's cameras (posemap.cameras=[...])",
         )
-    trained = {str(m["id"]): m for m in mapper.spec.get("camera_models", [])}
+    trained = dict(getattr(mapper, "calibrations", None) or {})
     recorded = ctx.cameras
-    for cid in mapper.cameras:
+    for cid in cameras:
         if cid not in trained:  # image features: the model keeps no calibration to compare
             continue
         if cid not in recorded:
@@ -132,7 +165,7 @@ def check_cameras(mapper: TrainedMapper, ctx: ReplayContext, where: str) -> None
             )
 
 
-def _position(option: Any, ctx: ReplayContext, namespace: str, mapper: TrainedMapper) -> list[float]:
+def _position(option: Any, ctx: ReplayContext, namespace: str, home: list[float] | None) -> list[float]:
     if option in (None, "recorded"):
         pose = base_pose(ctx.reader, namespace)
         if pose is None:
@@ -144,7 +177,7 @@ def _position(option: Any, ctx: ReplayContext, namespace: str, mapper: TrainedMa
             )
         return list(pose)
     if option == "model":
-        return [float(v) for v in mapper.spec.get("position", [0.0, 0.0, 0.0])]
+        return [float(v) for v in (home if home is not None else [0.0, 0.0, 0.0])]
     if isinstance(option, list) and len(option) == 3 and all(isinstance(v, (int, float)) for v in option):
         return [float(v) for v in option]
     raise ConfigError(
@@ -193,14 +226,21 @@ def _joints_table(pred: np.ndarray, truth: np.ndarray, mean_pose: np.ndarray) ->
 @register("posemap", path_options=("model",))
 def posemap(ctx: ReplayContext) -> dict[str, float]:
     """Predict the posed humanoid's joints from the recorded landmarks; score against its targets."""
-    options = _options(ctx)
-    where = f"posemap replay option model={options['model']}"
-    mapper = TrainedMapper(options["model"], where=where)
-    check_cameras(mapper, ctx, where)
+    options = dict(ctx.options)
+    spec, config = selected_mapper(ctx.config, options)
+    have = landmark_cameras(ctx.reader)
+    context = PosemapContext(
+        tuple(ctx.cameras[c] for c in have if c in ctx.cameras), extra={WHERE_KEY: WHERE}
+    )
+    model = getattr(config, "model", None)
+    where = f"{WHERE}model={model}" if model is not None else f"{WHERE}posemap={spec.name}"
+    mapper = registry.Guarded(spec.build(config, context, where=where), spec)
+    cameras = camera_ids(mapper, context)
+    check_cameras(mapper, cameras, ctx, where)
     namespace = str(options.get("namespace") or (ctx.config.get("posemap") or {}).get("namespace") or "")
     if not namespace:
         namespace = "robot_agent_1"
-    stream = read_landmark_stream(ctx.reader, mapper.cameras, namespace, where=str(ctx.reader.path))
+    stream = read_landmark_stream(ctx.reader, cameras, namespace, where=str(ctx.reader.path))
     if stream.estimators == ("replay",):
         raise RecordingInputError(
             "recording is a drive's output",
@@ -215,12 +255,15 @@ def posemap(ctx: ReplayContext) -> dict[str, float]:
             "no /<ns>/joint_states of 47 joints at every landmark stamp: the truth is unknown",
             "give --set namespace=<the posed humanoid> or record with experiment=posemap_motion",
         )
-    position = _position(options.get("position"), ctx, namespace, mapper)
+    home = getattr(mapper, "home_position", None)
+    position = _position(options.get("position"), ctx, namespace, home)
     t0 = time.perf_counter()
     pred = mapper.predict(stream.landmarks, position=position)
     predict_s = time.perf_counter() - t0
+    pred = check_targets(pred, len(stream.landmarks), where)
     truth = stream.truth
-    mean_pose = np.asarray(mapper.mapper.y_norm.mean if mapper.mapper.y_norm is not None else truth.mean(0))
+    own_mean = getattr(mapper, "mean_pose", None)
+    mean_pose = np.asarray(own_mean if own_mean is not None else truth.mean(0))
     metrics = joint_errors(pred, truth, prefix=PREFIX)
     metrics[f"{PREFIX}.mpjpe_m"], metrics[f"{PREFIX}.mpjpe_body_m"] = mpjpe(pred, truth)
     baseline = np.broadcast_to(mean_pose, truth.shape).copy()
@@ -229,7 +272,7 @@ def posemap(ctx: ReplayContext) -> dict[str, float]:
     metrics[f"{PREFIX}.frames"] = float(len(pred))
     metrics[f"{PREFIX}.predict_ms_per_frame"] = 1e3 * predict_s / max(1, len(pred))
     metrics[f"{PREFIX}.visible_fraction"] = float((stream.landmarks[..., 3] > 0.5).mean())
-    trained_at = np.asarray(mapper.spec.get("position", position)[:2], dtype=np.float64)
+    trained_at = np.asarray((home if home is not None else position)[:2], dtype=np.float64)
     metrics[f"{PREFIX}.base_offset_m"] = float(np.linalg.norm(np.asarray(position[:2]) - trained_at))
     _joints_table(pred, truth, mean_pose).write_parquet(ctx.out_dir / JOINTS_FILE)
     _frames_table(stream.stamps_ns, pred, truth).write_parquet(ctx.out_dir / FRAMES_FILE)

@@ -1,10 +1,16 @@
-"""Pose a humanoid during a run: from motion files, or from a landmark stream through a trained model.
+"""Pose a humanoid during a run: from motion files, or from a landmark stream through a pose mapper.
 
     posemap.motion=[...]            keyframes (SIMLAN motion files), each held then blended over
                                     posemap.motion_period_s, in turn
     posemap.drive=SOURCE            landmark frames (a dataset, or a recording's
-    posemap.drive_model=MODEL       /camera_<id>/pose_landmarks) --> trained mapper --> joint targets,
-                                    frame k at k / cameras.rate_hz (dataset) or at its recorded stamp
+                                    /camera_<id>/pose_landmarks) --> the pose mapper algorithms.posemap
+                                    (the built-in ``trained``: algorithms.posemap.model=MODEL) -->
+                                    joint targets, frame k at k / cameras.rate_hz (dataset) or at its
+                                    recorded stamp
+
+The pose mapper is built through the registry (:mod:`simlan_data.algorithms.registry`) from its
+own config, as the ``posemap`` replay builds it from a recording's, with the landmark source's
+cameras as its context; an exception inside it names it (``Guarded``, exit 1).
 
 Every control tick the posed humanoid ``posemap.namespace`` takes its targets and its joint
 positions are recorded on ``/<ns>/joint_states`` (sensor_msgs/JointState). With
@@ -17,14 +23,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.algorithms import registry
+from simlan_data.algorithms.posemap.config import TrainedMapperParams
 from simlan_data.algorithms.posemap.estimators import CameraView, ProjectionEstimator
 from simlan_data.algorithms.posemap.metrics import mpjpe
 from simlan_data.algorithms.posemap.motion import load_motion
-from simlan_data.algorithms.posemap.training import TrainedMapper
+from simlan_data.algorithms.roles import PosemapContext
+from simlan_data.algorithms.trained_posemap import TrainedPoseMapper, camera_ids
+from simlan_data.config.algorithms import plain
 from simlan_data.config.schema import Config
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError
@@ -33,7 +44,7 @@ from simlan_data.recording import messages as M
 from simlan_data.recording import schema
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.sim.humanoid import PosedHumanoidAgent
-from simlan_data.sim.posemap_inputs import LandmarkStream, load_stream
+from simlan_data.sim.posemap_inputs import LandmarkStream, load_stream, source_cameras
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.world.skeleton import JOINT_NAMES
 
@@ -46,6 +57,44 @@ class DriveInputs:
     stream: LandmarkStream | None = None
     predicted: NDArray[np.float64] | None = None  # the model's joint targets per stream frame
     predict_s: float = 0.0
+
+
+def selected_mapper(cfg: Config) -> tuple[registry.AlgorithmSpec, Any]:
+    """The pose mapper ``algorithms.posemap`` and its checked config (a Config built without
+    Hydra's defaults: the built-in with its defaults)."""
+    where = "config algorithms.posemap"
+    selected = cfg.algorithms.posemap
+    if selected is None:
+        spec = registry.resolve("posemap", registry.DEFAULTS["posemap"], where=where)
+        return spec, spec.make_config({}, where=where)
+    spec = registry.resolve("posemap", selected.name, where=where)
+    return spec, spec.make_config(plain(selected), where=where)
+
+
+def trained_mapper_params(cfg: Config) -> TrainedMapperParams:
+    """The built-in mapper's config, which training reads (refine and the fit's parameters).
+
+    Raises:
+        ConfigError: another pose mapper is selected (training makes the built-in's models).
+    """
+    spec, config = selected_mapper(cfg)
+    if not issubclass(spec.cls, TrainedPoseMapper):
+        raise ConfigError(
+            "posemap training trains the built-in pose mapper",
+            f"algorithms/posemap={spec.name}",
+            f"{spec.name} is not {registry.DEFAULTS['posemap']!r} (a model trained here, with its kinematic fit)",
+            f"select algorithms/posemap={registry.DEFAULTS['posemap']} (or leave it out)",
+        )
+    return config
+
+
+def build_mapper(cfg: Config, source: str) -> tuple[Any, list[str]]:
+    """The selected pose mapper (guarded) with the landmark source's cameras, and the camera ids
+    it reads (its ``cameras``, else all of them)."""
+    spec, config = selected_mapper(cfg)
+    context = PosemapContext(tuple(source_cameras(source)))
+    mapper = registry.Guarded(spec.build(config, context, where="config algorithms.posemap"), spec)
+    return mapper, camera_ids(mapper, context)
 
 
 def load_drive_inputs(cfg: Config) -> DriveInputs | None:
@@ -72,17 +121,36 @@ def load_drive_inputs(cfg: Config) -> DriveInputs | None:
             )
     out = DriveInputs()
     if pm.drive:
-        mapper = TrainedMapper(pm.drive_model)
+        mapper, cameras = build_mapper(cfg, pm.drive)
         out.stream = load_stream(
-            pm.drive, mapper.cameras, period_ns=round(NS_PER_S / cfg.cameras.rate_hz), namespace=pm.namespace
+            pm.drive, cameras, period_ns=round(NS_PER_S / cfg.cameras.rate_hz), namespace=pm.namespace
         )
         t0 = time.perf_counter()
         # rig features are in the frame of the source's person (where it stood), not the driven one
-        out.predicted = mapper.predict(out.stream.landmarks, position=out.stream.position)
+        predicted = mapper.predict(out.stream.landmarks, position=out.stream.position)
+        out.predicted = check_targets(predicted, len(out.stream.landmarks), "config algorithms.posemap")
         out.predict_s = time.perf_counter() - t0
     elif pm.motion:
         out.keys = np.stack([load_motion(m) for m in pm.motion])
     return out
+
+
+def check_targets(predicted: Any, frames: int, where: str) -> NDArray[np.float64]:
+    """A pose mapper's output as (frames, 47) joint targets; anything else is a ConfigError."""
+    q = np.asarray(predicted)
+    if q.dtype.kind != "f":  # (a float array stays as it is: the metrics see what it returned)
+        q = q.astype(np.float64)
+    if q.ndim == 1 and frames == 1:
+        q = q[None]
+    if q.shape != (frames, len(JOINT_NAMES)) or not np.isfinite(q).all():
+        raise ConfigError(
+            "pose mapper gave no joint targets",
+            where,
+            f"predict() of {frames} frames returned shape {q.shape}"
+            + ("" if q.shape != (frames, len(JOINT_NAMES)) else " with non-finite values"),
+            f"return ({frames}, {len(JOINT_NAMES)}) finite joint targets in radians",
+        )
+    return q
 
 
 class PoseDriver:

@@ -10,16 +10,20 @@ One reader for the live drive (``posemap.drive``, :mod:`simlan_data.sim.posemap_
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from simlan_data.algorithms.posemap.dataset import PARQUET_NAME, read_dataset
-from simlan_data.errors import ConfigError
+from simlan_data.algorithms.posemap.dataset import META_NAME, PARQUET_NAME, read_dataset, resolve_dataset
+from simlan_data.algorithms.posemap.features import Rig
+from simlan_data.errors import ConfigError, SimlanError
+from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.rotations import yaw_from_quat
 from simlan_data.recording import schema
+from simlan_data.recording.cameras import cameras_in_recording
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.world.skeleton import NUM_LANDMARKS
 
@@ -127,12 +131,34 @@ def stream_from_recording(path: str, cameras: list[str], namespace: str) -> Land
         return read_landmark_stream(bag, cameras, namespace, where=f"posemap.drive={path}")
 
 
+def source_cameras(path: str) -> list[CameraModel]:
+    """The cameras of a landmark source (what a pose mapper is built with), sorted by id: a dataset's
+    calibrations (dataset.json), a recording's cameras that have landmark topics."""
+    if _is_dataset(path):
+        parquet = resolve_dataset(path)
+        meta_path = parquet.with_name(META_NAME)
+        models = json.loads(meta_path.read_text()).get("camera_models", []) if meta_path.is_file() else []
+        ids = sorted(str(m["id"]) for m in models)
+        return list(Rig.from_meta(models, ids, [0.0, 0.0, 0.0]).cameras)
+    try:
+        with RecordingReader(path) as bag:
+            have = landmark_cameras(bag)
+            models = cameras_in_recording(bag)
+    except SimlanError:  # reading the stream says what is wrong with it (after the mapper's checks)
+        return []
+    return [models[c] for c in have if c in models]
+
+
+def _is_dataset(path: str) -> bool:
+    p = Path(path)
+    return p.suffix == ".parquet" or (p / PARQUET_NAME).is_file()
+
+
 def load_stream(path: str, cameras: list[str], *, period_ns: int, namespace: str) -> LandmarkStream:
     """A dataset (directory or parquet) or a recording, whichever ``path`` is."""
-    p = Path(path)
-    if p.suffix == ".parquet" or (p / PARQUET_NAME).is_file():
+    if _is_dataset(path):
         return stream_from_dataset(path, cameras, period_ns)
-    if p.exists():
+    if Path(path).exists():
         return stream_from_recording(path, cameras, namespace)
     raise ConfigError(
         "landmark source not found",

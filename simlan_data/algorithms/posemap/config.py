@@ -1,4 +1,5 @@
-"""Typed config of the pose mapping (``posemap.*``): dataset generation, training, the drive.
+"""Typed config of the pose mapping: the tasks (``posemap.*``: dataset generation, training, the
+drive) and the built-in pose mapper's own parameters (``algorithms.posemap.*``, name ``trained``).
 
 Part of :class:`simlan_data.config.schema.Config`; checked when the config is built, every failure a
 one-line ConfigError naming the key, the value and the fix.
@@ -60,14 +61,10 @@ class PosemapConfig:
     test_fraction: float = 0.15
     gbm_iterations: int = 300
     threads: int = 2
-    # fit the skeleton to every camera's landmarks, starting from the learned estimate
-    # (gpss/posemap/fit.py): none | fit
-    refine: str = "none"
-    refine_iterations: int = 15
-    refine_starts: int = 8  # 1 + random restarts of the arms where the fit stays far off
-    # --- drive (a simulation run whose humanoid follows a landmark stream through a trained model)
+    # (the kinematic fit trained with the model: algorithms.posemap.refine, see TrainedMapperParams)
+    # --- drive (a simulation run whose humanoid follows a landmark stream through the pose mapper
+    # algorithms.posemap: the built-in's model is algorithms.posemap.model)
     drive: str = ""  # landmark source: dataset (dir or parquet) or a recording with landmark topics
-    drive_model: str = ""  # a trained model directory (train run directory or its model/)
     motion: list[str] = field(default_factory=list)  # without drive: motion files posed in turn
     motion_period_s: float = 2.0
     namespace: str = "robot_agent_1"  # the posed humanoid driven by drive/motion
@@ -95,12 +92,6 @@ class PosemapConfig:
             raise _bad("model", self.model, f"expected one of {', '.join(MODELS)}", "use fusion")
         if self.loss not in LOSSES:
             raise _bad("loss", self.loss, f"expected one of {', '.join(LOSSES)}", "use auto")
-        if self.refine not in REFINES:
-            raise _bad("refine", self.refine, f"expected one of {', '.join(REFINES)}", "use fit (or none)")
-        if not 1 <= self.refine_iterations <= 1000:
-            raise _bad("refine_iterations", self.refine_iterations, "must be within 1..1000", "use 15")
-        if not 1 <= self.refine_starts <= 100:
-            raise _bad("refine_starts", self.refine_starts, "must be within 1..100", "use 8")
         if self.features not in FEATURES:
             raise _bad("features", self.features, f"expected one of {', '.join(FEATURES)}", "use rig")
         if not 0 <= self.samples <= 10_000_000:
@@ -155,13 +146,6 @@ class PosemapConfig:
                 "training needs a dataset",
                 "set posemap.dataset=<dataset run directory>",
             )
-        if bool(self.drive) != bool(self.drive_model):
-            raise _bad(
-                "drive" if not self.drive else "drive_model",
-                "",
-                "the drive needs both a landmark source (posemap.drive) and a model (posemap.drive_model)",
-                "set both",
-            )
         if not 0 < self.motion_period_s <= 3600:
             raise _bad("motion_period_s", self.motion_period_s, "must be within (0, 3600] s", "use 2.0")
         if not 0 <= self.landmarks_rate_hz <= 100:
@@ -170,3 +154,36 @@ class PosemapConfig:
             )
         if not 1 <= self.threads <= 64:
             raise _bad("threads", self.threads, "must be within 1..64", "use 2")
+
+
+@dataclass(frozen=True)
+class TrainedMapperParams:
+    """The built-in pose mapper ``trained`` (``algorithms.posemap.*``): a trained model, then the
+    kinematic fit of the skeleton to every camera's landmarks (:mod:`.fit`).
+
+    Training (``experiment=posemap_train``) reads ``refine`` and the fit's parameters too: with
+    ``refine=fit`` it measures the fit's prior (the learned model's held-out errors) and noise model
+    and saves them with the model. Running (drive, replay), ``refine=fit`` applies a model's saved fit
+    with these iterations and restarts (a model trained with ``refine=none`` has none: the learned
+    map alone); ``refine=none`` maps with the learned model alone.
+    """
+
+    model: str = ""  # a trained model directory (a train run directory or its model/); running needs one
+    refine: str = "fit"  # none | fit
+    refine_iterations: int = 15
+    refine_starts: int = 8  # 1 + random restarts of the arms where the fit stays far off
+
+    def __post_init__(self) -> None:
+        key = "algorithms.posemap."
+        if self.refine not in REFINES:
+            raise ConfigError.invalid(
+                key + "refine", self.refine, f"expected one of {', '.join(REFINES)}", "use fit (or none)"
+            )
+        if not 1 <= self.refine_iterations <= 1000:
+            raise ConfigError.invalid(
+                key + "refine_iterations", self.refine_iterations, "must be within 1..1000", "use 15"
+            )
+        if not 1 <= self.refine_starts <= 100:
+            raise ConfigError.invalid(
+                key + "refine_starts", self.refine_starts, "must be within 1..100", "use 8"
+            )

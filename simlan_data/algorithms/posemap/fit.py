@@ -255,7 +255,7 @@ def _arm_joints() -> NDArray[np.int64]:
 
 
 class Refiner:
-    """The learned estimate, refined by the fit: what ``posemap.refine=fit`` adds to a model.
+    """The learned estimate, refined by the fit: what ``algorithms.posemap.refine=fit`` adds to a model.
 
     Args:
         rig: the cameras the landmarks come from and where the support base stands.

@@ -2,8 +2,9 @@
 
 dataset.parquet --> split by sample id (train / val / test) --> features (mlp: one camera's
 x, y, z as SIMLAN; fusion, gbm: posemap.features of posemap.cameras) --> fit (val picks the
-epoch) --> predict test --> posemap.* metrics --> model/ (weights + model.json) and
-metrics.json, posemap_report.md in the run directory.
+epoch) --> [algorithms.posemap.refine=fit: the kinematic fit's prior and noise model] --> predict
+test --> posemap.* metrics --> model/ (weights + model.json) and metrics.json, posemap_report.md in
+the run directory.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from simlan_data import __version__
-from simlan_data.algorithms.posemap.config import PosemapConfig
+from simlan_data.algorithms.posemap.config import PosemapConfig, TrainedMapperParams
 from simlan_data.algorithms.posemap.dataset import PoseDataset, read_dataset, split_of
 from simlan_data.algorithms.posemap.features import Rig, build_features
 from simlan_data.algorithms.posemap.fit import FitParams, Refiner, pixel_noise
@@ -43,22 +44,23 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def feature_spec(pm: PosemapConfig, data: PoseDataset) -> dict[str, Any]:
-    """Which cameras and which features the model reads (saved with the model)."""
+def feature_spec(pm: PosemapConfig, data: PoseDataset, *, refine: bool = False) -> dict[str, Any]:
+    """Which cameras and which features the model reads (saved with the model); ``refine``: the
+    kinematic fit is trained too (it needs the cameras' calibrations)."""
     cameras = list(pm.cameras) if pm.cameras else list(data.cameras)
     if pm.model == "mlp":  # SIMLAN's baseline: one camera's x, y, z
         cameras, kind = cameras[:1], "simlan"
     else:
         kind = pm.features
     spec: dict[str, Any] = {"cameras": [str(c) for c in cameras], "features": kind}
-    if kind == "rig" or pm.refine != "none":
+    if kind == "rig" or refine:
         models = data.meta.get("camera_models")
         if not models:
             raise ConfigError(
                 "dataset lacks camera models",
                 "dataset.json",
-                "rig features and posemap.refine need the cameras' calibrations",
-                "regenerate the dataset or use posemap.features=image posemap.refine=none",
+                "rig features and algorithms.posemap.refine=fit need the cameras' calibrations",
+                "regenerate the dataset or use posemap.features=image algorithms.posemap.refine=none",
             )
         spec["camera_models"] = [m for m in models if str(m["id"]) in spec["cameras"]]
         spec["position"] = data.meta.get("position", [5.3, -10.0, 0.0])
@@ -76,6 +78,7 @@ def features_for(landmarks: np.ndarray, spec: dict[str, Any]) -> np.ndarray:
 
 def make_refiner(
     pm: PosemapConfig,
+    fit: TrainedMapperParams,
     data: PoseDataset,
     spec: dict[str, Any],
     residuals: np.ndarray,
@@ -94,8 +97,8 @@ def make_refiner(
     params = FitParams(
         noise_px=noise[0],
         hidden_noise_px=noise[1],
-        iterations=pm.refine_iterations,
-        starts=pm.refine_starts,
+        iterations=fit.refine_iterations,
+        starts=fit.refine_starts,
         limit_scale=float(data.meta.get("limit_scale", pm.limit_scale)),
         seed=seed,
     )
@@ -250,11 +253,20 @@ def _print_summary(
 
 
 def train(
-    pm: PosemapConfig, run_dir: Path, *, seed: int = 0, config_yaml: str = "", progress: bool = True
+    pm: PosemapConfig,
+    run_dir: Path,
+    *,
+    fit: TrainedMapperParams | None = None,
+    seed: int = 0,
+    config_yaml: str = "",
+    progress: bool = True,
 ) -> dict[str, float]:
-    """Train ``pm.model`` on ``pm.dataset``; write model, metrics and report into ``run_dir``."""
+    """Train ``pm.model`` on ``pm.dataset`` and, with ``fit.refine=fit`` (the built-in mapper's
+    ``algorithms.posemap``; default: its defaults), the kinematic fit after it; write model,
+    metrics and report into ``run_dir``."""
+    fit = fit if fit is not None else TrainedMapperParams()
     data = read_dataset(pm.dataset)
-    spec = feature_spec(pm, data)
+    spec = feature_spec(pm, data, refine=fit.refine == "fit")
     data = data.select_cameras(spec["cameras"])
     split, sizes = _split(pm, data)
     t0 = time.perf_counter()
@@ -270,8 +282,8 @@ def train(
     held_out = va if va.any() else tr
     val_pred = mapper.predict(x[held_out])
     refiner, refine_s = None, 0.0
-    if pm.refine == "fit":
-        refiner = make_refiner(pm, data, spec, val_pred - y[held_out], data.landmarks[tr], y[tr], seed)
+    if fit.refine == "fit":
+        refiner = make_refiner(pm, fit, data, spec, val_pred - y[held_out], data.landmarks[tr], y[tr], seed)
         learned = y_pred
         t2 = time.perf_counter()
         y_pred = refiner(data.landmarks[te], learned)
@@ -307,8 +319,10 @@ def train(
     return metrics
 
 
-def train_from_config(pm: PosemapConfig, run_dir: Path, *, seed: int, config_yaml: str) -> dict[str, float]:
-    return train(pm, run_dir, seed=seed, config_yaml=config_yaml, progress=True)
+def train_from_config(
+    pm: PosemapConfig, fit: TrainedMapperParams, run_dir: Path, *, seed: int, config_yaml: str
+) -> dict[str, float]:
+    return train(pm, run_dir, fit=fit, seed=seed, config_yaml=config_yaml, progress=True)
 
 
 class TrainedMapper:
@@ -316,13 +330,24 @@ class TrainedMapper:
 
     Args:
         path: a training run directory or its ``model/``.
-        where: how the user named it, for error lines (``posemap.drive_model=...``).
+        where: how the user named it, for error lines (``algorithms.posemap.model=...``).
+        refine: apply the kinematic fit saved with the model (if it has one); False: the learned
+            model alone.
+        iterations, starts: the fit's iterations and restarts (default: as saved).
     Raises:
         ConfigError: no model there, or one that cannot be read (named, with the cause).
     """
 
-    def __init__(self, path: str, *, where: str = "") -> None:
-        where = where or f"posemap.drive_model={path}"
+    def __init__(
+        self,
+        path: str,
+        *,
+        where: str = "",
+        refine: bool = True,
+        iterations: int | None = None,
+        starts: int | None = None,
+    ) -> None:
+        where = where or f"algorithms.posemap.model={path}"
         directory = Path(path)
         if (directory / MODEL_DIRNAME / "model.json").is_file():
             directory = directory / MODEL_DIRNAME
@@ -346,6 +371,14 @@ class TrainedMapper:
                 "retrain it (python -m simlan_data.run experiment=posemap_train ...) or restore its files",
             ) from err
         self.directory = directory
+        saved = self.info.get("refine") if refine else None
+        if saved:
+            params = dict(saved["params"])
+            params.update(
+                {k: v for k, v in (("iterations", iterations), ("starts", starts)) if v is not None}
+            )
+            saved = {**saved, "params": params}
+        self.refine: dict[str, Any] | None = saved or None  # the fit as it runs (Refiner.to_dict)
 
     def predict(self, landmarks: np.ndarray, *, position: list[float] | None = None) -> np.ndarray:
         """Joint targets (N, 47) of landmarks (N, C, 33, 4) in ``self.cameras`` order.
@@ -356,6 +389,6 @@ class TrainedMapper:
         spec = self.spec if position is None else {**self.spec, "position": list(position)}
         landmarks = np.asarray(landmarks, dtype=np.float32)
         q = self.mapper.predict(features_for(landmarks, spec))
-        if self.info.get("refine"):
-            q = Refiner.from_dict(self.info["refine"], rig_of(spec))(landmarks, q)
+        if self.refine:
+            q = Refiner.from_dict(self.refine, rig_of(spec))(landmarks, q)
         return q
