@@ -224,7 +224,9 @@ def main() -> None:
         metrics = (
             scen["blind_spot"]
             if t == 5.0
-            else run(out, live_dir.name, "scenario=blind_spot", f"safety.observability.timeout_s={t}")
+            else run(
+                out, live_dir.name, "scenario=blind_spot", f"algorithms.safety.observability.timeout_s={t}"
+            )
         )
         live = blind_figures(live_dir)
         cf: dict[str, Any] = {}

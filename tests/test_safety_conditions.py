@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from shapely.geometry import Polygon
 
-from conftest import compose_config
+from simlan_data.algorithms import registry
 from simlan_data.algorithms.people import PersonDetection, PersonTracker, fuse_people
+from simlan_data.algorithms.roles import SafetyContext as RunContext
 from simlan_data.algorithms.safety import (
     DRIVE,
     SLOW,
@@ -19,8 +20,9 @@ from simlan_data.algorithms.safety import (
     RobotSafetyTree,
     RobotSpec,
     SafetyLayer,
-    SafetyParams,
     SafetyWorld,
+    TreeParams,
+    TreesConfig,
     clamp_command,
     make_zone,
 )
@@ -37,8 +39,9 @@ from simlan_data.algorithms.safety.geometry import (
     stopping_distance_m,
     swept_rollout,
 )
+from simlan_data.config.algorithms import plain
 from simlan_data.config.collision import collision_setup, travel_m
-from simlan_data.config.validation import to_config
+from simlan_data.config.validation import compose_config as checked_config
 from simlan_data.errors import ConfigError
 from simlan_data.world.agent_types import AGENT_TYPES
 
@@ -47,11 +50,11 @@ JACKAL = AGENT_TYPES["jackal"].footprint_m
 S = 1_000_000_000
 
 
-def _params(**sections: dict) -> SafetyParams:
-    return SafetyParams.from_dict(sections, control_rate_hz=20.0, camera_rate_hz=5.0)
+def _params(coordinated: bool = False, **sections: dict) -> TreeParams:
+    return TreeParams(TreesConfig(**sections), 1.0 / 20.0, 1.0 / 5.0, 0.0, coordinated)
 
 
-def _ctx(params: SafetyParams, *, pose=(0.0, 0.0, 0.0), speed=0.0, age=0.0, footprint=TRUCK) -> SafetyContext:
+def _ctx(params: TreeParams, *, pose=(0.0, 0.0, 0.0), speed=0.0, age=0.0, footprint=TRUCK) -> SafetyContext:
     ctx = SafetyContext(RobotSpec("robot_agent_1", footprint, 1.0), params, params.zones)
     ctx.estimate = RobotEstimate(pose, speed, 0.0, 0.0, age, pose)
     return ctx
@@ -205,8 +208,11 @@ def test_tree_slows_for_a_far_hazard_and_stays_stopped_while_any_hazard_remains(
 def test_layer_events_are_deterministic_and_ttc_ignores_coordinated_robots() -> None:
     spec1, spec2 = RobotSpec("robot_agent_1", TRUCK, 1.0), RobotSpec("robot_agent_2", JACKAL, 1.0)
 
-    def run(params: SafetyParams) -> list:
-        layer = SafetyLayer([spec1, spec2], params)
+    def run(params: TreeParams) -> list:
+        run = RunContext(
+            [spec1, spec2], (), params.control_period_s, params.camera_period_s, 0.0, params.coordinated
+        )
+        layer = SafetyLayer(params.config, run)
         for k in range(40):
             x = -6.0 + 0.05 * k
             est = {
@@ -221,9 +227,9 @@ def test_layer_events_are_deterministic_and_ttc_ignores_coordinated_robots() -> 
     uncoordinated = _params()
     first, second = run(uncoordinated), run(uncoordinated)
     assert first == second and ("robot_agent_1", STOP, "ttc") in {e[1:] for e in first}
-    coordinated = SafetyParams.from_dict({}, coordinated=True)
+    coordinated = _params(coordinated=True)
     assert run(coordinated) == []
-    always = SafetyParams.from_dict({"ttc": {"robots": "always"}}, coordinated=True)
+    always = _params(coordinated=True, ttc={"robots": "always"})
     assert run(always) == first
 
 
@@ -245,32 +251,42 @@ def test_layer_events_are_deterministic_and_ttc_ignores_coordinated_robots() -> 
 )
 def test_bad_zones_are_refused_with_the_field_named(zones: list, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
-        SafetyParams.from_dict({"zones": zones})
+        TreesConfig(zones=zones)
 
 
 def test_unknown_namespaces_and_values_are_refused() -> None:
     zone = {"name": "a", "polygon": [[0, 0], [1, 0], [0, 1]], "namespaces": ["robot_agent_9"]}
-    with pytest.raises(ConfigError, match=r"safety.zones\[0\].namespaces.*no agent 'robot_agent_9'"):
-        SafetyParams.from_dict({"zones": [zone]}, known_namespaces=["robot_agent_1"])
-    with pytest.raises(ConfigError, match=r"safety.ttc.namespaces.*no agent 'robot_agent_7'"):
-        SafetyParams.from_dict({"ttc": {"namespaces": ["robot_agent_7"]}}, known_namespaces=["robot_agent_1"])
-    with pytest.raises(ConfigError, match=r"safety.collision.resume='sometimes'"):
-        SafetyParams.from_dict({"collision": {"resume": "sometimes"}})
-    with pytest.raises(ConfigError, match=r"safety.ttc.slow_ttc_s=1.0.*must be >="):
-        SafetyParams.from_dict({"ttc": {"slow_ttc_s": 1.0}})
-    with pytest.raises(ConfigError, match=r"unknown key safety.zone\b"):
-        SafetyParams.from_dict({"zone": []})
-    with pytest.raises(ConfigError, match=r"safety.zones\[0\].namespaces=\['robot_agent_9'\]"):
-        to_config(
-            compose_config(
-                "safety.zones=[{name: a, polygon: [[0,0],[1,0],[0,1]], namespaces: [robot_agent_9]}]"
-            )
+    with pytest.raises(
+        ConfigError, match=r"algorithms\.safety\.zones\[0\].namespaces.*no agent 'robot_agent_9'"
+    ):
+        TreesConfig(zones=[zone]).check_namespaces(["robot_agent_1"])
+    with pytest.raises(ConfigError, match=r"algorithms\.safety\.ttc.namespaces.*no agent 'robot_agent_7'"):
+        TreesConfig(ttc={"namespaces": ["robot_agent_7"]}).check_namespaces(["robot_agent_1"])
+    with pytest.raises(ConfigError, match=r"algorithms\.safety\.collision.resume='sometimes'"):
+        TreesConfig(collision={"resume": "sometimes"})
+    with pytest.raises(ConfigError, match=r"algorithms\.safety\.ttc.slow_ttc_s=1.0.*must be >="):
+        TreesConfig(ttc={"slow_ttc_s": 1.0})
+    with pytest.raises(ConfigError, match=r"algorithms\.safety\.ttc.stop_cpa\b"):
+        TreesConfig(ttc={"stop_cpa": 1.0})
+    with pytest.raises(ConfigError, match=r"unknown key 'zone' for safety 'trees'"):
+        registry.resolve("safety", "trees").make_config({"zone": []}, where="replay --set")
+    with pytest.raises(ConfigError, match=r"algorithms\.safety\.zones\[0\].namespaces=\['robot_agent_9'\]"):
+        checked_config(
+            ["algorithms.safety.zones=[{name: a, polygon: [[0,0],[1,0],[0,1]], namespaces: [robot_agent_9]}]"]
         )
+    with pytest.raises(ConfigError, match=r"algorithms\.safety\.ttc.resume='sometimes'"):
+        checked_config(["algorithms.safety.ttc.resume=sometimes"])
 
 
 def test_zone_from_the_composed_config_reaches_the_trees() -> None:
-    cfg = to_config(compose_config("scenario=restricted_zone"))
-    params = cfg.safety_params()
+    cfg = checked_config(["scenario=restricted_zone"])
+    selected = cfg.algorithms.safety
+    assert selected.name == "trees"
+    config = registry.resolve("safety", selected.name).make_config(plain(selected), where="test")
+    run = RunContext(
+        [], (), 1.0 / cfg.control_rate_hz, 1.0 / cfg.cameras.rate_hz, 0.0, cfg.navigation.coordination
+    )
+    params = TreeParams.of(config, run)
     (zone,) = params.zones
     assert zone.name == "loading_bay" and zone.namespaces == ("robot_agent_1",)
     assert zone.polygon.equals(Polygon([(4, -2.4), (7, -2.4), (7, 3.2), (4, 3.2)]))

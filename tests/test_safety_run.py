@@ -42,11 +42,12 @@ scenario: {{name: safety_test}}
 duration_s: 5.0
 world: {{fidelity: light, settle_s: 0.0}}
 cameras: {{ids: [162, 163], width: 480, height: 270}}
-algorithms: {{localizer: {{lost_timeout_s: 30.0}}}}
-safety:
-  observability: {{timeout_s: 0.5}}
-  zones:
-    - {{name: test_bay, polygon: {ZONE}, namespaces: [robot_agent_1]}}
+algorithms:
+  localizer: {{lost_timeout_s: 30.0}}
+  safety:
+    observability: {{timeout_s: 0.5}}
+    zones:
+      - {{name: test_bay, polygon: {ZONE}, namespaces: [robot_agent_1]}}
 """
 
 
@@ -206,15 +207,18 @@ def test_counterfactual_replay_reproduces_live_then_a_new_zone_changes_the_verdi
     ("override", "message"),
     [
         (
-            "safety.zones=[{name: x, polygon: [[0,0],[2,2],[2,0],[0,2]]}]",
+            "algorithms.safety.zones=[{name: x, polygon: [[0,0],[2,2],[2,0],[0,2]]}]",
             "not a simple polygon (Self-intersection",
         ),
-        ("safety.zones=[{name: x, polygon: [[0,0],[2,2]]}]", "needs at least 3 distinct corners"),
+        ("algorithms.safety.zones=[{name: x, polygon: [[0,0],[2,2]]}]", "needs at least 3 distinct corners"),
         (
-            "safety.zones=[{name: x, polygon: [[0,0],[2,0],[0,2]], namespaces: [robot_agent_5]}]",
+            "algorithms.safety.zones=[{name: x, polygon: [[0,0],[2,0],[0,2]], namespaces: [robot_agent_5]}]",
             "there is no agent 'robot_agent_5' in this run",
         ),
-        ("safety.ttc.namespaces=[robot_agent_8]", "invalid safety.ttc.namespaces=['robot_agent_8']"),
+        (
+            "algorithms.safety.ttc.namespaces=[robot_agent_8]",
+            "invalid algorithms.safety.ttc.namespaces=['robot_agent_8']",
+        ),
     ],
 )
 def test_bad_zone_configs_get_one_line_and_exit_2(override: str, message: str, tmp_path: Path) -> None:
@@ -238,7 +242,7 @@ def test_bad_counterfactual_zone_gets_one_line_and_exit_2(safety_run: Path, tmp_
     )
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
-        "error: invalid --set.zones[0].polygon=[[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]] in config: "
+        "error: invalid algorithms.safety.zones[0].polygon=[[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]] in config: "
         "zone 'x' is not a simple polygon (Self-intersection[1 1]); list the corners in order around the area, "
         "without crossing edges"
     ]

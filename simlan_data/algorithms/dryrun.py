@@ -15,9 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simlan_data.algorithms.coordinator import footprint_polygon
-from simlan_data.algorithms.localization import LocalizerParams
 from simlan_data.algorithms.occupancy import OccupancyGrid
-from simlan_data.algorithms.safety import SafetyEvent, SafetyParams
+from simlan_data.algorithms.safety import SafetyEvent, SafetyLayer, TreesConfig
 from simlan_data.algorithms.stack import AgentPlan, GpssStack, NavigationParams
 from simlan_data.constants import NS_PER_S
 from simlan_data.geometry.rotations import wrap_angle
@@ -48,12 +47,20 @@ def dry_run(
     duration_s: float,
     control_hz: float = 20.0,
     accel_mps2: float = 1.0,
-    safety: SafetyParams | None = None,
+    safety: TreesConfig | None = None,
 ) -> DryRunResult:
     """Drive ``agents`` (diff-drive robots and walkers) for ``duration_s`` with the GPSS stack
     (and its safety layer, on ground truth, if ``safety`` is given)."""
-    stack = GpssStack(agents, {}, grid, nav=nav, loc=LocalizerParams(), source="ground_truth", safety=safety)
     dt = 1.0 / control_hz
+    stack = GpssStack(
+        agents,
+        {},
+        grid,
+        nav=nav,
+        source="ground_truth",
+        safety=None if safety is None else (lambda ctx: SafetyLayer(safety, ctx)),
+        control_period_s=dt,
+    )
     poses = {a.namespace: np.array(a.pose, dtype=float) for a in agents}
     speeds = {a.namespace: 0.0 for a in agents}
     traj: dict[str, list[tuple[float, float, float, float]]] = {a.namespace: [] for a in agents}
@@ -97,5 +104,5 @@ def dry_run(
         min_pair,
         {ns: getattr(stack.coordinator, "waits", {}).get(ns, 0) * dt for ns in stack.navigators},
         {ns: np.array(v) for ns, v in traj.items()},
-        list(stack.safety.events),
+        list(stack.safety_events),
     )

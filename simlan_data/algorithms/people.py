@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import cv2
 import numpy as np
@@ -32,13 +31,16 @@ from numpy.typing import NDArray
 
 from simlan_data.algorithms.safety import Mover
 from simlan_data.constants import NS_PER_S
+from simlan_data.errors import ConfigError
 from simlan_data.geometry.camera import CameraModel
 
 HUMANOID_LABEL = 53
 
 
-@dataclass(frozen=True)
+@dataclass
 class PeopleParams:
+    """Person detection from the cameras (the run's ``people`` section; the replay reads the recorded one)."""
+
     enabled: bool = True
     min_pixels: int = 12  # smaller blobs are ignored
     max_pixels: int = 400  # pixels per blob used for the foot point (subsampled, deterministic)
@@ -50,11 +52,19 @@ class PeopleParams:
     height_m: float = 1.7  # a whole person's height, for the completeness check
     min_extent: float = 0.6  # a blob must span this share of a whole person's floor projection
 
-    @staticmethod
-    def from_dict(section: dict[str, Any] | None) -> PeopleParams:
-        """From a config's ``safety.people`` section (unknown keys ignored; defaults for the rest)."""
-        known = {f.name for f in dataclasses.fields(PeopleParams)}
-        return PeopleParams(**{k: v for k, v in (section or {}).items() if k in known})
+    def __post_init__(self) -> None:
+        if (
+            self.min_pixels < 1
+            or not 0 <= self.body_radius_m <= 1
+            or self.cluster_m <= 0
+            or self.max_age_s <= 0
+        ):
+            raise ConfigError.invalid(
+                "people",
+                dataclasses.asdict(self),
+                "min_pixels >= 1, body_radius_m within 0..1, cluster_m and max_age_s > 0",
+                "use the defaults",
+            )
 
 
 @dataclass(frozen=True)

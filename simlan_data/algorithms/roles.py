@@ -17,7 +17,7 @@ simulated clock in integer nanoseconds; nothing here is a simulator, file-format
                                               command(t_ns, ns, v, w)          None
                                               estimate(t_ns)                   {ns: PoseEstimate}
     coordinator  safety_distance_m            decide(t_ns, intents)            {ns: Decision}
-    safety       robots, static movers        step(world)                      {ns: SafetyDecision}
+    safety       robots, static, run clocks   step(world)                      {ns: SafetyDecision}
     stitcher     cameras, canvas region       stitch(frames)                   canvas (HxWx3 uint8)
     posemap      cameras                      predict(landmarks, position=)    joint targets (47,)
 """
@@ -79,10 +79,17 @@ class CoordinatorContext:
 
 @dataclass(frozen=True)
 class SafetyContext:
-    """What a safety monitor is built with: every robot's footprint and drive, obstacles that stand."""
+    """What a safety monitor is built with: every agent's footprint and drive (``kind`` robot,
+    person or static), obstacles that stand, and what the run adds that is not the monitor's
+    configuration: its control and camera periods, the localizer's processing delay and whether
+    the central coordinator is on (``navigation.coordination``)."""
 
     robots: Sequence[RobotSpec]
     static: Sequence[Mover] = ()
+    control_period_s: float = 0.05
+    camera_period_s: float = 0.2
+    processing_delay_s: float = 0.0
+    coordinated: bool = False
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ Data flow::
     camera tick:  JPEG per camera --> Localizer (detect, fuse) --> fixes
                   segmentation per camera --> PersonDetector --> fused people --> PersonTracker
     control tick: Localizer.estimate --> poses --> Coordinator (who waits) --+
-                  estimates, contacts, tracked people, plans --> SafetyLayer --+--> Navigator per
+                  estimates, contacts, tracked people, plans --> SafetyMonitor -+--> Navigator per
                   robot (speed limits of both) --> (v, w) after the safety layer, per robot;
                   people (walkers) walk their waypoints on their own
 
@@ -41,18 +41,25 @@ from simlan_data.algorithms.people import (
     fuse_people,
 )
 from simlan_data.algorithms.planner import GridPlanner
-from simlan_data.algorithms.roles import CameraFrame, CoordinatorContext, LocalizerContext, searches
+from simlan_data.algorithms.roles import (
+    CameraFrame,
+    CoordinatorContext,
+    LocalizerContext,
+    SafetyContext,
+    searches,
+)
 from simlan_data.algorithms.safety import (
     FREE,
     STOP,
+    Monitor,
     RobotEstimate,
     RobotSpec,
     SafetyDecision,
-    SafetyLayer,
-    SafetyParams,
+    SafetyEvent,
     SafetyWorld,
     clamp_command,
     mover_of,
+    transition_events,
 )
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.world.agent_types import MARKER_SIZE_M, AgentType
@@ -107,8 +114,11 @@ class GpssStack:
         localizer: Callable[[LocalizerContext], Any] | None = None,
         coordinator: Callable[[CoordinatorContext], Any] | None = None,
         source: str = "camera",
-        safety: SafetyParams | None = None,
+        safety: Callable[[SafetyContext], Any] | None = None,
         people: PeopleParams | None = None,
+        control_period_s: float = 0.05,
+        camera_period_s: float = 0.2,
+        processing_delay_s: float = 0.0,
     ) -> None:
         self.agents = {a.namespace: a for a in agents}
         self.grid, self.nav, self.source = grid, nav, source
@@ -170,7 +180,23 @@ class GpssStack:
             if a.kind.drive == "static"
             and (m := mover_of(specs[a.namespace], RobotEstimate(a.pose))) is not None
         ]
-        self.safety = SafetyLayer(list(specs.values()), safety or SafetyParams(enabled=False), static=static)
+        self.specs = specs
+        # the safety monitor (None: no safety layer); its context carries what the run adds
+        run = SafetyContext(
+            list(specs.values()),
+            static,
+            control_period_s,
+            camera_period_s,
+            processing_delay_s,
+            nav.coordination,
+        )
+        self.safety = safety(run) if safety is not None else None
+        # the events published on /safety/events: the monitor's own (``events``) where it keeps
+        # them (the built-in), else each change of a robot's state or cause (transition_events)
+        own_events = getattr(self.safety, "events", None)
+        self.safety_events: list[SafetyEvent] = own_events if own_events is not None else []
+        self._derive_events = self.safety is not None and own_events is None
+        self._safety_state: dict[str, SafetyDecision] = {}  # the last decision per robot
         self._cancelled: set[str] = set()
         self._speeds: dict[str, tuple[float, float]] = {}  # last command per robot (ground-truth source)
         # people carry no marker: GPSS finds them in the segmentation images (where there are any)
@@ -283,7 +309,7 @@ class GpssStack:
                 )
                 v, w = self._speeds.get(ns, (0.0, 0.0))
                 est = RobotEstimate(truth[ns], v, w, 0.0, 0.0, truth[ns])
-                if (m := mover_of(self.safety.specs[ns], est)) is not None:
+                if (m := mover_of(self.specs[ns], est)) is not None:
                     people.append(m)
         for person in people:  # where the cameras see people (never their ground truth)
             heading = float(np.arctan2(person.vy_mps, person.vx_mps))
@@ -300,7 +326,7 @@ class GpssStack:
         if self.nav.coordination:
             out.decisions = self.coordinator.decide(t_ns, intents)
             self._granted = {ns for ns, d in out.decisions.items() if d.speed_limit_mps is None}
-        if self.safety.trees:
+        if self.safety is not None and getattr(self.safety, "trees", True):
             world = SafetyWorld(
                 t_ns,
                 self.robot_estimates(out.estimates, truth),
@@ -313,6 +339,9 @@ class GpssStack:
                 {ns: nav.goal is not None for ns, nav in self.navigators.items()},
             )
             out.safety = self.safety.step(world)
+            if self._derive_events:
+                self.safety_events.extend(transition_events(self._safety_state, out.safety, world))
+            self._safety_state.update(out.safety)
         for ns, nav in self.navigators.items():
             guard = out.safety.get(ns, FREE)
             if guard.state == STOP:  # zero command, navigation cancelled (replanned on resume)
@@ -338,6 +367,16 @@ class GpssStack:
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
         self._speeds = dict(out.commands)
         return out
+
+    def safety_states(self) -> dict[str, tuple[SafetyDecision, Monitor]]:
+        """Every guarded robot's decision and state-topic values after the last control tick: the
+        monitor's own ``decisions`` and ``monitors`` where it keeps them (the built-in), else its
+        last decisions with no values."""
+        monitors = getattr(self.safety, "monitors", None)
+        decisions = getattr(self.safety, "decisions", None)
+        if monitors is not None and decisions is not None:
+            return {ns: (d, monitors[ns]) for ns, d in decisions.items() if ns in monitors}
+        return {ns: (d, Monitor()) for ns, d in self._safety_state.items()}
 
     def _detour(self, ns: str, pose: tuple[float, float, float], others: list[Intent]) -> bool:
         """Plan ``ns`` around the others; adopt the plan only if the coordinator will let it drive.

@@ -22,10 +22,11 @@ agent poses and goals, so the recorded config holds the resolved numbers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from simlan_data.errors import ConfigError
 from simlan_data.world.agent_types import AGENT_TYPES
 
 HEAD_ON, PALLET_TRUCK_SIDE, JACKAL_SIDE = 0, 1, 2
@@ -151,3 +152,45 @@ def resolve(key: str, section: dict) -> object:
     if key not in values:
         raise KeyError(f"unknown collision_setup key {key!r}; known: {', '.join(values)}")
     return values[key]
+
+
+_bad = ConfigError.invalid  # invalid KEY=VALUE in config: WHY; FIX
+
+
+@dataclass
+class CollisionScenarioConfig:
+    """SIMLAN's collision families (scenario=collision): the ``collision`` section (scenario data)."""
+
+    angle: float = 90.0  # the Jackal's heading relative to the truck's, degrees (0: catch-up, 180: head-on)
+    truck_speed_mps: float = 1.0
+    collision_type: int = 0  # 0 head-on, 1 pallet-truck side, 2 Jackal side (SIMLAN's CollisionType)
+    jackal_speed_mps: float = 1.0
+    point: list[float] = field(default_factory=lambda: [5.5, 1.0])  # where they meet (map)
+    time_s: float = 3.0  # from the start to the contact, if nothing stops them
+    overlap_m: float = 0.1
+    guarded: str = "both"  # robots with a safety tree: both | jackal (SIMLAN's setup) | truck | none
+
+    def __post_init__(self) -> None:
+        if self.guarded not in GUARDED:
+            raise _bad(
+                "collision.guarded",
+                self.guarded,
+                f"expected one of {', '.join(GUARDED)}",
+                "use both",
+            )
+        if self.collision_type not in (0, 1, 2):
+            raise _bad(
+                "collision.collision_type",
+                self.collision_type,
+                "0 head-on, 1 pallet-truck side, 2 Jackal side",
+                "use 0, 1 or 2",
+            )
+        for name in ("truck_speed_mps", "jackal_speed_mps"):
+            if not 0 < getattr(self, name) <= 2.0:
+                raise _bad(
+                    f"collision.{name}", getattr(self, name), "must be within (0, 2] m/s", "use e.g. 1.0"
+                )
+        if not 1.0 <= self.time_s <= 30.0:
+            raise _bad("collision.time_s", self.time_s, "must be within 1..30 s", "use 3.0")
+        if len(self.point) != 2:
+            raise _bad("collision.point", list(self.point), "expected [x_m, y_m]", "use [5.5, 1.0]")

@@ -16,12 +16,13 @@ import numpy as np
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from simlan_data.algorithms import registry
 from simlan_data.algorithms.birdseye import CanvasSpec
+from simlan_data.algorithms.people import PeopleParams
 from simlan_data.algorithms.posemap.config import PosemapConfig
-from simlan_data.algorithms.safety import SafetyParams
 from simlan_data.config import collision as collision_scenario
-from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms
-from simlan_data.config.safety import CollisionScenarioConfig, SafetyConfig
+from simlan_data.config.algorithms import AlgorithmsConfig, plain, register_algorithms
+from simlan_data.config.collision import CollisionScenarioConfig
 from simlan_data.errors import ConfigError
 
 NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
@@ -507,7 +508,7 @@ class Config:
     posemap: PosemapConfig = field(default_factory=PosemapConfig)
     perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
     faults: FaultsConfig = field(default_factory=FaultsConfig)
-    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    people: PeopleParams = field(default_factory=PeopleParams)  # person detection (the cameras' segmentation)
     collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
 
     def __post_init__(self) -> None:
@@ -569,7 +570,7 @@ class Config:
                     f"use one of {', '.join(map(str, self.cameras.ids))}",
                 )
         self._jitter_spawn_poses()
-        self.safety_params()  # namespaces named in the safety section must be agents of the run
+        self._check_safety_namespaces()
 
     def _jitter_spawn_poses(self) -> None:
         """Move every agent's spawn pose by its seeded offset (see PerturbationConfig)."""
@@ -583,15 +584,17 @@ class Config:
             x, y, yaw = (float(v) for v in agent.pose)
             agent.pose = [x + float(dx), y + float(dy), yaw + float(dyaw)]
 
-    def safety_params(self) -> SafetyParams:
-        """The safety trees' parameters for this run (rates from the run's clocks)."""
-        return self.safety.params(
-            control_rate_hz=self.control_rate_hz,
-            camera_rate_hz=self.cameras.rate_hz,
-            processing_delay_s=float(getattr(self.algorithms.localizer, "processing_delay_s", 0.0)),
-            coordinated=self.navigation.coordination,
-            known_namespaces=list(self.agents),
-        )
+    def _check_safety_namespaces(self) -> None:
+        """The namespaces the safety monitor's config names must be agents of the run (for a
+        monitor whose config can say: ``check_namespaces(known, where=)``, as the trees' does)."""
+        selected = self.algorithms.safety
+        if selected is None:
+            return
+        spec = registry.resolve("safety", selected.name, where="config")
+        config = spec.make_config(plain(selected), where="config algorithms.safety")
+        check = getattr(config, "check_namespaces", None)
+        if callable(check):
+            check(list(self.agents))
 
     @property
     def agent_list(self) -> list[AgentConfig]:

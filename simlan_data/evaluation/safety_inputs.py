@@ -14,12 +14,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.algorithms import registry
+from simlan_data.algorithms.roles import SafetyContext
 from simlan_data.algorithms.safety import (
     DRIVE,
     RobotEstimate,
     RobotSpec,
     SafetyEvent,
-    SafetyParams,
+    TreeParams,
+    TreesConfig,
     mover_of,
 )
 from simlan_data.constants import NS_PER_S
@@ -82,14 +85,39 @@ class SafetyRecording:
         return min(int(np.searchsorted(self.ticks, stamp_ns)), len(self.ticks) - 1)
 
 
-def safety_params(
-    config: dict[str, Any], overrides: dict[str, Any] | None = None, *, where: str = "safety"
-) -> SafetyParams:
-    """SafetyParams of a recorded run's config, with ``overrides`` (dotted keys) applied."""
-    section: dict[str, Any] = {
-        k: (dict(v) if isinstance(v, dict) else v) for k, v in (config.get("safety") or {}).items()
-    }
-    for key, value in (overrides or {}).items():
+LEGACY_SECTION = "safety"  # where recordings made before safety was an algorithm keep its config
+
+
+def with_safety_algorithm(config: dict[str, Any]) -> dict[str, Any]:
+    """A recorded config with ``algorithms.safety``: a recording made before the safety monitor was
+    an algorithm ran the built-in trees with its top-level ``safety`` section (less ``people``)."""
+    algorithms = dict(config.get("algorithms") or {})
+    if "safety" in algorithms or LEGACY_SECTION not in config:
+        return config
+    legacy = {k: v for k, v in (config.get(LEGACY_SECTION) or {}).items() if k != "people"}
+    algorithms["safety"] = {registry.NAME_KEY: registry.DEFAULTS["safety"], **legacy}
+    return {**config, "algorithms": algorithms}
+
+
+def selected_safety(
+    config: dict[str, Any], options: dict[str, Any] | None = None, *, where: str = "replay --set"
+) -> tuple[registry.AlgorithmSpec, Any]:
+    """The safety monitor and its config: the recording's, or ``options["safety"]`` (a registered
+    name or module:Class); the other options are its config's dotted keys (``ttc.enabled``),
+    applied over the recorded values (over none when another monitor is selected).
+
+    Raises:
+        ConfigError: an unknown name or key, a value its config rejects.
+        RecordingInputError: a dotted key through a value that is not a section.
+    """
+    options = dict(options or {})
+    name = options.pop("safety", None)
+    recorded_name, values = registry.selection(with_safety_algorithm(config), "safety")
+    if name is not None and str(name) != recorded_name:
+        values = {}
+    spec = registry.resolve("safety", recorded_name if name is None else str(name), where=where)
+    section: dict[str, Any] = {k: (dict(v) if isinstance(v, dict) else v) for k, v in values.items()}
+    for key, value in options.items():
         parts = key.split(".")
         node = section
         for p in parts[:-1]:
@@ -99,17 +127,58 @@ def safety_params(
                     f"invalid --set {key}", where, f"{p} is not a section", "check the key"
                 )
         node[parts[-1]] = value
-    section.pop("people", None)
-    loc = config.get("localization") or {}
-    return SafetyParams.from_dict(
-        section,
-        control_rate_hz=float(config.get("control_rate_hz", 20.0)),
-        camera_rate_hz=float((config.get("cameras") or {}).get("rate_hz", 5.0)),
-        processing_delay_s=float(loc.get("processing_delay_s", 0.0)),
-        coordinated=bool((config.get("navigation") or {}).get("coordination", True)),
-        known_namespaces=sorted(config.get("agents") or {}),
-        where=where,
+    safety_config = spec.make_config(section, where=where)
+    check = getattr(safety_config, "check_namespaces", None)
+    if callable(check):
+        check(sorted(config.get("agents") or {}))
+    return spec, safety_config
+
+
+def processing_delay_s(config: dict[str, Any]) -> float:
+    """The localizer's processing delay of a recorded run (``algorithms.localizer``; recordings
+    made before the localizer was an algorithm kept it under ``localization``)."""
+    localizer = (config.get("algorithms") or {}).get("localizer") or {}
+    if "processing_delay_s" in localizer:
+        return float(localizer["processing_delay_s"])
+    return float((config.get("localization") or {}).get("processing_delay_s", 0.0))
+
+
+def safety_context(
+    config: dict[str, Any], specs: dict[str, RobotSpec], spawn: dict[str, Any]
+) -> SafetyContext:
+    """What the live safety monitor was built with, from a recorded run's config."""
+    static = [
+        m
+        for ns, spec in specs.items()
+        if spec.kind == "static" and (m := mover_of(spec, RobotEstimate(spawn[ns]))) is not None
+    ]
+    return SafetyContext(
+        list(specs.values()),
+        static,
+        1.0 / float(config.get("control_rate_hz", 20.0)),
+        1.0 / float((config.get("cameras") or {}).get("rate_hz", 5.0)),
+        processing_delay_s(config),
+        bool((config.get("navigation") or {}).get("coordination", True)),
     )
+
+
+def judging_params(config: dict[str, Any], safety_config: Any, context: SafetyContext) -> TreeParams:
+    """The trees' params the metrics judge hazards by: the selected config where it is the trees',
+    else the recording's trees config (or the trees' defaults) for another monitor."""
+    if not isinstance(safety_config, TreesConfig):
+        name, values = registry.selection(with_safety_algorithm(config), "safety")
+        safety_config = TreesConfig(**values) if name == registry.DEFAULTS["safety"] else TreesConfig()
+    return TreeParams.of(safety_config, context)
+
+
+def safety_params(
+    config: dict[str, Any], options: dict[str, Any] | None = None, *, where: str = "replay --set"
+) -> TreeParams:
+    """The trees' params a recorded run is judged by (with ``options`` as in :func:`selected_safety`);
+    without options the recorded monitor is not loaded (a plug-in need not be importable here)."""
+    specs, spawn = agent_specs(config)
+    safety_config = selected_safety(config, options, where=where)[1] if options else None
+    return judging_params(config, safety_config, safety_context(config, specs, spawn))
 
 
 def agent_specs(config: dict[str, Any]) -> tuple[dict[str, RobotSpec], dict[str, tuple[float, float, float]]]:

@@ -40,7 +40,7 @@ from simlan_data.algorithms.safety import (
     RobotEstimate,
     SafetyDecision,
     SafetyEvent,
-    SafetyParams,
+    TreeParams,
 )
 from simlan_data.algorithms.safety.conditions import (
     SafetyContext,
@@ -119,7 +119,7 @@ def truth_ages(rec: SafetyRecording, ns: str, cameras: dict[str, CameraModel]) -
 
 def truth_hazards(
     rec: SafetyRecording,
-    params: SafetyParams,
+    params: TreeParams,
     states: dict[str, list[str]],
     cameras: dict[str, CameraModel],
 ) -> dict[str, dict[str, NDArray[np.bool_]]]:
@@ -231,7 +231,7 @@ class _Tally:
 def _robot(
     rec: SafetyRecording,
     ns: str,
-    params: SafetyParams,
+    params: TreeParams,
     states: dict[str, list[str]],
     flags: dict[str, NDArray[np.bool_]],
 ) -> _Robot:
@@ -259,7 +259,7 @@ def _zone_entries(rec: SafetyRecording, r: _Robot, tally: _Tally) -> list[Violat
 
 
 def _collisions(
-    rec: SafetyRecording, r: _Robot, params: SafetyParams, tol: int, tally: _Tally
+    rec: SafetyRecording, r: _Robot, params: TreeParams, tol: int, tally: _Tally
 ) -> list[Violation]:
     """Find the contact episodes over the force threshold and whether the robot stopped within the budget."""
     dt = params.control_period_s
@@ -267,7 +267,7 @@ def _collisions(
     v_ns: list[Violation] = []
     # the recorded collision sensor is ground truth
     force = np.array([c[0] for c in rec.contacts[r.ns]])
-    touching = (force >= params.collision.force_threshold_n) & (force > 0)
+    touching = (force >= params.config.collision.force_threshold_n) & (force > 0)
     for i in _edges(touching, merge=round(1.0 / dt)):
         lo = max(0, i - 5)
         was_moving = bool((np.abs(tr.speed_mps[lo : i + 1]) > MOVING_MPS).any())
@@ -289,11 +289,11 @@ def _unobserved_intervals(rec: SafetyRecording, r: _Robot, tol: int) -> list[Vio
     return v_ns
 
 
-def _latencies(rec: SafetyRecording, r: _Robot, params: SafetyParams, tol: int, tally: _Tally) -> list[float]:
+def _latencies(rec: SafetyRecording, r: _Robot, params: TreeParams, tol: int, tally: _Tally) -> list[float]:
     """Time each truth hazard's onset (while moving) to the robot's stop command; unanswered ones count."""
     lat_ns: list[float] = []
     for cause in CAUSES:
-        if not params.applies(r.ns, cause):
+        if not params.config.applies(r.ns, cause):
             continue
         for i in _edges(r.flags[cause]):
             if not r.moving[i] and not r.stopped[i]:
@@ -313,7 +313,7 @@ def _latencies(rec: SafetyRecording, r: _Robot, params: SafetyParams, tol: int, 
 def _stops(
     rec: SafetyRecording,
     r: _Robot,
-    params: SafetyParams,
+    params: TreeParams,
     stops: list[SafetyEvent],
     tol: int,
     tally: _Tally,
@@ -333,7 +333,7 @@ def _stops(
         if e.cause == "unobserved" and not justified:
             k = int(np.searchsorted(found, e.stamp_ns, side="right"))
             dropout_s = (e.stamp_ns - int(found[k - 1])) / NS_PER_S if k > 0 else float("inf")
-            justified = dropout_s > params.observability.timeout_s
+            justified = dropout_s > params.config.observability.timeout_s
             tally.tot["visible"] += 1
         if not justified:
             false += 1
@@ -361,7 +361,7 @@ def _agent_clearance(rec: SafetyRecording, r: _Robot) -> float:
 
 def evaluate(
     rec: SafetyRecording,
-    params: SafetyParams,
+    params: TreeParams,
     events: list[SafetyEvent],
     states: dict[str, list[str]],
     cameras: dict[str, CameraModel],
@@ -384,7 +384,7 @@ def evaluate(
         v_ns += _collisions(rec, r, params, tol, tally)
         v_ns += _unobserved_intervals(rec, r, tol)
         tally.violations += v_ns
-        lat_ns = _latencies(rec, r, params, tol, tally) if params.applies(ns) else []
+        lat_ns = _latencies(rec, r, params, tol, tally) if params.config.applies(ns) else []
         tally.latencies += lat_ns
         stops = [e for e in mine if e.action == STOP]
         false, dists = _stops(rec, r, params, stops, tol, tally)

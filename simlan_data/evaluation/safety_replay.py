@@ -3,8 +3,11 @@
     python -m simlan_data.replay REC --out DIR --algorithms safety \\
         --set 'zones=[{"name": "dock", "polygon": [[2, -2], [6, -2], [6, 3], [2, 3]]}]' \\
         --set observability.timeout_s=1.0
+    python -m simlan_data.replay REC --out DIR --algorithms safety --set safety=my_pkg.mod:MyMonitor
 
-The trees are ticked again on what the live trees read, as recorded: every robot's estimate
+``--set safety=NAME`` selects another safety monitor (a registered name or module:Class); the
+other ``--set`` keys are the selected monitor's config keys (dotted), over the recorded ones.
+The monitor (the recorded trees by default) is ticked again on what the live trees read, as recorded: every robot's estimate
 (``/<ns>/pose_estimate``, ``velocity_estimate``, ``localization_status``), its collision sensor,
 its plans and navigation state, and the people detections (through the same tracker). With the
 recorded config this reproduces the live events exactly (``replay.safety.events_diff_to_live`` =
@@ -26,30 +29,46 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
+from simlan_data.algorithms import registry
 from simlan_data.algorithms.people import PeopleParams, PersonTracker
 from simlan_data.algorithms.safety import (
     DRIVE,
+    FREE,
     STOP,
-    RobotEstimate,
+    SafetyDecision,
     SafetyEvent,
-    SafetyLayer,
-    SafetyParams,
     SafetyWorld,
-    mover_of,
+    TreeParams,
+    transition_events,
 )
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import RecordingInputError
 from simlan_data.evaluation.replay import ReplayContext, register
-from simlan_data.evaluation.safety_inputs import SafetyRecording, read_safety_recording, safety_params
+from simlan_data.evaluation.safety_inputs import (
+    SafetyRecording,
+    judging_params,
+    read_safety_recording,
+    safety_context,
+    selected_safety,
+)
 from simlan_data.evaluation.safety_metrics import Violation, evaluate
 
 VERDICTS_MD = "safety_counterfactual.md"
 
 
+def people_params(config: dict) -> PeopleParams:
+    """The recorded person detection (``people``; ``safety.people`` in older recordings)."""
+    section = config.get("people")
+    if section is None:
+        section = (config.get("safety") or {}).get("people")
+    return PeopleParams(**(section or {}))
+
+
 def replay_trees(
-    rec: SafetyRecording, params: SafetyParams
+    rec: SafetyRecording, spec: registry.AlgorithmSpec, safety_config: object
 ) -> tuple[list[SafetyEvent], dict[str, list[str]]]:
-    """Tick the trees with ``params`` on the recorded inputs; events and the state at every tick."""
+    """Tick the safety monitor ``spec`` with ``safety_config`` on the recorded inputs; events and
+    the state at every tick of every guarded robot (the built-in's trees; every robot otherwise)."""
     if not rec.estimates:
         raise RecordingInputError(
             "no camera estimates",
@@ -57,14 +76,14 @@ def replay_trees(
             "the safety replay needs the localizer's output (localization.source=camera)",
             "replay a run steered by the cameras",
         )
-    static = [
-        m
-        for ns, spec in rec.specs.items()
-        if spec.kind == "static" and (m := mover_of(spec, RobotEstimate(rec.spawn[ns]))) is not None
-    ]
-    layer = SafetyLayer(list(rec.specs.values()), params, static=static)
-    tracker = PersonTracker(PeopleParams.from_dict((rec.config.get("safety") or {}).get("people")))
-    states: dict[str, list[str]] = {ns: [] for ns in layer.trees}
+    context = safety_context(rec.config, rec.specs, rec.spawn)
+    monitor = registry.Guarded(spec.build(safety_config, context, where="replay"), spec)
+    tracker = PersonTracker(people_params(rec.config))
+    guarded = getattr(monitor, "trees", None)
+    states: dict[str, list[str]] = {ns: [] for ns in (rec.robots if guarded is None else guarded)}
+    own_events = getattr(monitor, "events", None)
+    events: list[SafetyEvent] = [] if own_events is None else own_events
+    last: dict[str, SafetyDecision] = {}
     navigating = {ns: rec.goals.get(ns, 0) > 0 for ns in rec.robots}
     k = 0
     for i, t in enumerate(rec.ticks):
@@ -84,10 +103,13 @@ def replay_trees(
             {ns: (rec.plans[ns][i - 1] if i > 0 else None) for ns in rec.robots},
             dict(navigating),
         )
-        decisions = layer.step(world)
+        decisions = monitor.step(world)
+        if own_events is None:
+            events.extend(transition_events(last, decisions, world))
+            last.update(decisions)
         for ns in states:
-            states[ns].append(decisions[ns].state)
-    return layer.events, states
+            states[ns].append(decisions.get(ns, FREE).state)
+    return events, states
 
 
 @dataclass(frozen=True)
@@ -114,7 +136,7 @@ def _stop_start(states: list[str], i: int) -> int | None:
 
 def verdicts(
     rec: SafetyRecording,
-    params: SafetyParams,
+    params: TreeParams,
     violations: list[Violation],
     cf_states: dict[str, list[str]],
     diverged: dict[str, int | None],
@@ -158,7 +180,7 @@ def verdicts(
             float(np.sum(np.hypot(*np.diff(tr.pose[start : i + 1, :2], axis=0).T))) if i > start else 0.0
         )
         speed = abs(float(tr.speed_mps[start]))
-        needed = speed * speed / (2.0 * params.restricted_area.decel_mps2)
+        needed = speed * speed / (2.0 * params.config.restricted_area.decel_mps2)
         verdict = "prevented" if needed < travelled else "too late"
         d = diverged.get(v.namespace)
         if d is not None and d < start:
@@ -216,11 +238,13 @@ def _events_table(events: list[SafetyEvent]) -> pl.DataFrame:
 
 @register("safety")
 def safety(ctx: ReplayContext) -> dict[str, float]:
-    """Re-run the safety trees with the recording's safety config plus ``--set`` overrides."""
+    """Re-run the safety monitor (``--set safety=NAME``, else the recorded one) with the recording's
+    config plus ``--set`` overrides."""
     config = ctx.config
-    params = safety_params(config, dict(ctx.options), where="--set")
+    spec, safety_config = selected_safety(config, dict(ctx.options), where="replay --set")
     rec = read_safety_recording(ctx.reader, config)
-    events, states = replay_trees(rec, params)
+    events, states = replay_trees(rec, spec, safety_config)
+    params = judging_params(config, safety_config, safety_context(config, rec.specs, rec.spawn))
     cameras = ctx.cameras
     metrics, _, _ = evaluate(rec, params, events, states, cameras, prefix="replay.safety")
     # what really happened, judged with the counterfactual config (its zones, timeouts)
@@ -254,7 +278,7 @@ def safety(ctx: ReplayContext) -> dict[str, float]:
 
 def write_counterfactual_report(
     ctx: ReplayContext,
-    params: SafetyParams,
+    params: TreeParams,
     events: list[SafetyEvent],
     live_events: list[SafetyEvent],
     judged: list[Verdict],
@@ -275,8 +299,8 @@ def write_counterfactual_report(
         "",
         f"Recording: `{ctx.reader.path}`; overrides: `{dict(ctx.options)}`.",
         f"Zones: {', '.join(f'{z.name} {z.points}' for z in params.zones) or 'none'}; "
-        f"observability timeout {params.observability.timeout_s:g} s; TTC stop at CPA <= {params.ttc.stop_cpa_m:g} m "
-        f"and TTC <= {params.ttc.stop_ttc_s:g} s.",
+        f"observability timeout {params.config.observability.timeout_s:g} s; TTC stop at CPA <= {params.config.ttc.stop_cpa_m:g} m "
+        f"and TTC <= {params.config.ttc.stop_ttc_s:g} s.",
         "",
         "Nothing is re-simulated: the robots' motion is the recorded one. After the first decision that "
         "differs from the live run the recording no longer shows what a robot would have done; verdicts "

@@ -9,7 +9,7 @@ from simlan_data import __version__
 from simlan_data.algorithms.localization import PoseEstimate
 from simlan_data.algorithms.markers import Detection
 from simlan_data.algorithms.navigation import Navigator
-from simlan_data.algorithms.safety import SafetyEvent, SafetyLayer, Zone
+from simlan_data.algorithms.safety import Monitor, SafetyDecision, SafetyEvent, Zone
 from simlan_data.config.schema import Config
 from simlan_data.constants import FORMAT_VERSION
 from simlan_data.geometry.camera import CameraModel
@@ -202,14 +202,13 @@ class Publisher:
             global_topic(schema.SAFETY_ZONES), 0, M.zone_markers(0, [(z.name, z.points) for z in zones])
         )
 
-    def safety(self, t: int, layer: SafetyLayer, events: list[SafetyEvent]) -> None:
-        """New safety events, and every guarded robot's tree state."""
+    def safety(
+        self, t: int, states: dict[str, tuple[SafetyDecision, Monitor]], events: list[SafetyEvent]
+    ) -> None:
+        """New safety events, and every guarded robot's state (decision and monitor values)."""
         for ev in events:
             self.writer.write(global_topic(schema.SAFETY_EVENTS), t, safety_event_msg(ev))
-        for ns, decision in layer.decisions.items():
-            mon = layer.monitors.get(ns)
-            if mon is None:
-                continue
+        for ns, (decision, mon) in states.items():
             self.writer.write(
                 self.topics[ns]["safety_state"],
                 t,

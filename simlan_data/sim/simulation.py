@@ -32,7 +32,6 @@ import numpy as np
 from simlan_data import __version__
 from simlan_data.algorithms import registry
 from simlan_data.algorithms.localization import ImageSearch
-from simlan_data.algorithms.people import PeopleParams
 from simlan_data.algorithms.roles import CameraFrame
 from simlan_data.algorithms.stack import AgentPlan, GpssStack, NavigationParams
 from simlan_data.config.algorithms import plain
@@ -214,8 +213,11 @@ class Simulation:
             localizer=self._factory("localizer"),
             coordinator=self._factory("coordinator"),
             source=loc.source,
-            safety=cfg.safety_params(),
-            people=PeopleParams.from_dict(asdict(cfg.safety.people)),
+            safety=self._factory("safety"),
+            people=cfg.people,
+            control_period_s=1.0 / cfg.control_rate_hz,
+            camera_period_s=1.0 / cfg.cameras.rate_hz,
+            processing_delay_s=float(getattr(cfg.algorithms.localizer, "processing_delay_s", 0.0)),
         )
 
     def _factory(self, role: str) -> Callable[[Any], Any]:
@@ -274,7 +276,7 @@ class Simulation:
         pub = Publisher(writer, cfg, scene.agents)
         pub.static(config_yaml=self.config_yaml, renderer=scene.client.backend, cameras=scene.cameras)
         stack = self._stack(scene)
-        pub.safety_zones(stack.safety.params.zones)
+        pub.safety_zones(getattr(stack.safety, "zones", ()))  # a monitor's restricted areas, if it has any
         recorder = CameraRecorder(
             writer,
             cfg.recording,
@@ -354,11 +356,11 @@ class Simulation:
                 # sensed before the control step: the safety trees read this tick's contacts
                 hits = {agent.namespace: agent.collisions(ignore, scene.names) for agent in scene.agents}
                 contacts = {ns: (hit.max_force_n, tuple(hit.others)) for ns, hit in hits.items()}
-                n_events = len(stack.safety.events)
+                n_events = len(stack.safety_events)
                 out = stack.control(t, dt_control, truth, contacts)
                 if stack.source == "camera":
                     pub.estimates(t, out.estimates, stack.localized)
-                pub.safety(t, stack.safety, stack.safety.events[n_events:])
+                pub.safety(t, stack.safety_states(), stack.safety_events[n_events:])
                 for agent in scene.agents:
                     ns = agent.namespace
                     v, w = agent.apply_command(*out.commands.get(ns, (0.0, 0.0)))

@@ -1,9 +1,10 @@
 """Safety layer: one py_trees behaviour tree per robot over the estimates GPSS steers on.
 
 - ``geometry``: zones, stopping distance, swept footprints, CPA and TTC (shapely/numpy);
-- ``params``: the parameters, built and checked from the ``safety`` config section;
+- ``params``: the one config (``TreesConfig``: ``algorithms.safety``) and what the run adds to it;
 - ``conditions``: the tree's inputs (``SafetyWorld``), its condition functions and outputs;
-- ``tree``: the behaviour tree of one robot and the ``SafetyLayer`` of all robots.
+- ``tree``: the behaviour tree of one robot and the ``SafetyLayer`` of all robots (registered as
+  ``safety.trees``).
 """
 
 from __future__ import annotations
@@ -21,16 +22,19 @@ from simlan_data.algorithms.safety.conditions import (
     SafetyDecision,
     SafetyEvent,
     SafetyWorld,
+    transition_events,
 )
 from simlan_data.algorithms.safety.geometry import Zone, make_zone
 from simlan_data.algorithms.safety.params import (
     CAUSES,
     RESUME_POLICIES,
-    CollisionParams,
-    ObservabilityParams,
-    RestrictedAreaParams,
-    SafetyParams,
-    TtcParams,
+    CollisionConfig,
+    ObservabilityConfig,
+    RestrictedAreaConfig,
+    TreeParams,
+    TreesConfig,
+    TtcConfig,
+    ZoneConfig,
 )
 from simlan_data.algorithms.safety.tree import (
     RobotSafetyTree,
@@ -47,24 +51,27 @@ __all__ = [
     "RESUME_POLICIES",
     "SLOW",
     "STOP",
-    "CollisionParams",
+    "CollisionConfig",
     "Finding",
     "Monitor",
     "Mover",
-    "ObservabilityParams",
-    "RestrictedAreaParams",
+    "ObservabilityConfig",
+    "RestrictedAreaConfig",
     "RobotEstimate",
     "RobotSafetyTree",
     "RobotSpec",
     "SafetyDecision",
     "SafetyEvent",
     "SafetyLayer",
-    "SafetyParams",
     "SafetyWorld",
-    "TtcParams",
+    "TreeParams",
+    "TreesConfig",
+    "TtcConfig",
     "Zone",
+    "ZoneConfig",
     "build_tree",
     "clamp_command",
     "make_zone",
     "mover_of",
+    "transition_events",
 ]

@@ -23,7 +23,7 @@ from simlan_data.algorithms.safety.geometry import (
     swept_path,
     swept_rollout,
 )
-from simlan_data.algorithms.safety.params import SafetyParams
+from simlan_data.algorithms.safety.params import TreeParams
 
 DRIVE, SLOW, STOP = "drive", "slow", "stop"
 
@@ -127,7 +127,7 @@ class SafetyContext:
     """One robot's inputs and state, shared by the behaviours of its tree."""
 
     spec: RobotSpec
-    params: SafetyParams
+    params: TreeParams
     zones: tuple[Zone, ...]
     stamp_ns: int = 0
     estimate: RobotEstimate = field(default_factory=lambda: RobotEstimate(None))
@@ -162,14 +162,14 @@ class SafetyContext:
 
 def contact(ctx: SafetyContext) -> Finding | None:
     force, bodies = ctx.contact
-    if force >= ctx.params.collision.force_threshold_n and force > 0:
+    if force >= ctx.params.config.collision.force_threshold_n and force > 0:
         who = ", ".join(bodies) or "something"
         return Finding("collision", f"contact {force:.0f} N with {who}", bodies[0] if bodies else "")
     return None
 
 
 def unobserved(ctx: SafetyContext) -> Finding | None:
-    age, timeout = ctx.estimate.fix_age_s, ctx.params.observability.timeout_s
+    age, timeout = ctx.estimate.fix_age_s, ctx.params.config.observability.timeout_s
     if age < 0:
         return Finding("unobserved", "never seen by a camera")
     if age > timeout:
@@ -179,7 +179,7 @@ def unobserved(ctx: SafetyContext) -> Finding | None:
 
 def swept_region(ctx: SafetyContext) -> Any:
     """The area the robot's footprint may cover before it stands still (grown by the margins)."""
-    p = ctx.params.restricted_area
+    p = ctx.params.config.restricted_area
     est = ctx.estimate
     assert est.pose is not None
     reaction = ctx.params.reaction_s
@@ -242,7 +242,7 @@ def worst_approach(ctx: SafetyContext, level: str) -> Finding | None:
     if own is None:
         return None
     centre, velocity = own
-    p = ctx.params.ttc
+    p = ctx.params.config.ttc
     limit_s = p.stop_ttc_s if level == STOP else p.slow_ttc_s
     radius = circumradius(ctx.spec.footprint)
     best: Finding | None = None
@@ -290,3 +290,31 @@ def monitor(ctx: SafetyContext) -> Monitor:
     now = footprint_polygon(est.pose, ctx.spec.footprint)
     clearance = min((float(now.distance(z.polygon)) for z in ctx.zones), default=float("inf"))
     return Monitor(ttc, cpa, nearest, who, clearance)
+
+
+def transition_events(
+    before: dict[str, SafetyDecision], decisions: dict[str, SafetyDecision], world: SafetyWorld
+) -> list[SafetyEvent]:
+    """The events of a monitor that keeps none: each change of a robot's state or cause (as the
+    built-in writes them: action stop | slow | resume, where the robot was, what held it)."""
+    out = []
+    for ns, decision in decisions.items():
+        last = before.get(ns, FREE)
+        if (decision.state, decision.cause) == (last.state, last.cause):
+            continue
+        est = world.estimates.get(ns, RobotEstimate(None))
+        driving = decision.state == DRIVE
+        out.append(
+            SafetyEvent(
+                world.stamp_ns,
+                ns,
+                decision.cause or last.cause,
+                "resume" if driving else decision.state,
+                est.pose or est.last_pose,
+                est.speed_mps,
+                decision.detail,
+                last.other if driving else decision.other,
+                est.pose is not None,
+            )
+        )
+    return out

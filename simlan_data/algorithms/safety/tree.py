@@ -59,7 +59,7 @@ from simlan_data.algorithms.safety.conditions import (
     worst_approach,
 )
 from simlan_data.algorithms.safety.geometry import centre_velocity, circumradius, footprint_centre
-from simlan_data.algorithms.safety.params import SafetyParams
+from simlan_data.algorithms.safety.params import TreeParams, TreesConfig
 from simlan_data.constants import NS_PER_S
 
 # ----------------------------------------------------------------------------- behaviours
@@ -95,7 +95,7 @@ class _Hold(py_trees.behaviour.Behaviour):
         t = ctx.stamp_ns
         ctx.last_hazard_ns = t
         if self.state == STOP:
-            if ctx.latched is None and ctx.params.condition(finding.cause).resume == "never":
+            if ctx.latched is None and ctx.params.config.condition(finding.cause).resume == "never":
                 ctx.latched = finding
         elif ctx.held.state == STOP:
             # a stopped robot is not let off to crawl towards a hazard that is still there (it would
@@ -128,14 +128,14 @@ class _ClearFor(py_trees.behaviour.Behaviour):
     """SUCCESS when the robot is not held, or no hazard was seen for ``hold_s``."""
 
     def __init__(self, ctx: SafetyContext) -> None:
-        super().__init__(f"ClearFor({ctx.params.hold_s:g} s)?")
+        super().__init__(f"ClearFor({ctx.params.config.hold_s:g} s)?")
         self.ctx = ctx
 
     def update(self) -> Status:
         ctx = self.ctx
         if ctx.held.state == DRIVE or ctx.last_hazard_ns is None:
             return Status.SUCCESS
-        clear = ctx.stamp_ns - ctx.last_hazard_ns >= ctx.params.hold_s * NS_PER_S
+        clear = ctx.stamp_ns - ctx.last_hazard_ns >= ctx.params.config.hold_s * NS_PER_S
         return Status.SUCCESS if clear else Status.FAILURE
 
 
@@ -161,7 +161,7 @@ class _KeepHeld(py_trees.behaviour.Behaviour):
 
 def build_tree(ctx: SafetyContext) -> py_trees.composites.Selector:
     """The tree of one robot: only the branches of the conditions that apply to it."""
-    ns, p = ctx.spec.namespace, ctx.params
+    ns, p = ctx.spec.namespace, ctx.params.config
 
     def branch(name: str, check: py_trees.behaviour.Behaviour, action: py_trees.behaviour.Behaviour) -> Any:
         return py_trees.composites.Sequence(name, memory=False, children=[check, action])
@@ -202,7 +202,7 @@ def build_tree(ctx: SafetyContext) -> py_trees.composites.Selector:
 class RobotSafetyTree:
     """One robot's tree and its context."""
 
-    def __init__(self, spec: RobotSpec, params: SafetyParams) -> None:
+    def __init__(self, spec: RobotSpec, params: TreeParams) -> None:
         zones = tuple(z for z in params.zones if z.applies_to(spec.namespace))
         self.ctx = SafetyContext(spec, params, zones)
         self.root = build_tree(self.ctx)
@@ -257,18 +257,29 @@ def mover_of(spec: RobotSpec, estimate: RobotEstimate) -> Mover | None:
 
 
 class SafetyLayer:
-    """The trees of every guarded robot; turns per-tick snapshots into decisions and events."""
+    """The trees of every guarded robot; turns per-tick snapshots into decisions and events.
 
-    def __init__(
-        self, agents: Sequence[RobotSpec], params: SafetyParams, *, static: Sequence[Mover] = ()
-    ) -> None:
+    The built-in safety monitor, registered as ``safety.trees``: built from its one config
+    (:class:`TreesConfig`) and the run's :class:`~simlan_data.algorithms.roles.SafetyContext`
+    (robots, static obstacles, the run's clocks), like any plug-in. Beyond the protocol's ``step``
+    it keeps ``events`` (appended at every change of a robot's state or cause), ``monitors`` (the
+    values of each robot's state topic), ``trees`` and ``zones`` (published once).
+    """
+
+    role = "safety"
+    config_class = TreesConfig
+
+    def __init__(self, config: TreesConfig, context: Any) -> None:
+        params = TreeParams.of(config, context)
+        agents = list(context.robots)
         self.params = params
+        self.zones = params.zones
         self.specs = {a.namespace: a for a in agents}
-        self.static = list(static)
+        self.static = list(context.static)
         self.trees = {
             a.namespace: RobotSafetyTree(a, params)
             for a in agents
-            if a.kind == "robot" and params.applies(a.namespace)
+            if a.kind == "robot" and config.applies(a.namespace)
         }
         self.decisions: dict[str, SafetyDecision] = dict.fromkeys(self.trees, FREE)
         self.monitors: dict[str, Monitor] = {}
@@ -299,7 +310,11 @@ class SafetyLayer:
             if (decision.state, decision.cause) != (before.state, before.cause):
                 action = decision.state if decision.state != DRIVE else "resume"
                 cause = decision.cause or before.cause
-                detail = decision.detail if decision.state != DRIVE else f"clear for {self.params.hold_s:g} s"
+                detail = (
+                    decision.detail
+                    if decision.state != DRIVE
+                    else f"clear for {self.params.config.hold_s:g} s"
+                )
                 self.events.append(
                     SafetyEvent(
                         world.stamp_ns,
