@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 
+from simlan_data.config.schema import register_configs
 from simlan_data.constants import CONF_DIR
 
 REPO = Path(__file__).resolve().parents[1]
@@ -33,6 +34,7 @@ def run_cli(
 
 def compose_config(*overrides: str):
     """Compose the Hydra config as the app does, without a process (DictConfig)."""
+    register_configs(list(overrides))  # the schema and every algorithm, as the app does first
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         return compose("config", overrides=list(overrides))
 

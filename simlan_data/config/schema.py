@@ -24,6 +24,7 @@ from simlan_data.config import collision as collision_scenario
 from simlan_data.config.algorithms import AlgorithmsConfig, plain, register_algorithms
 from simlan_data.config.collision import CollisionScenarioConfig
 from simlan_data.errors import ConfigError
+from simlan_data.world.physics import PhysicsParams
 
 NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
 STREAMS = ("rgb", "depth", "semantic")
@@ -74,47 +75,13 @@ def _divides(field_name: str, rate_hz: float, physics_hz: int) -> None:
         )
 
 
-@dataclass
-class ObjectPhysicsConfig:
-    """Physics parameters of one class of world objects."""
-
-    mass_kg: float = 0.0
-    lateral_friction: float = 0.8
-    rolling_friction: float = 0.0
-    spinning_friction: float = 0.0
-    restitution: float = 0.0
-    linear_damping: float = 0.04
-    angular_damping: float = 0.04
-
-    def __post_init__(self) -> None:
-        if _incomplete(self):
-            return
-        for name in (
-            "mass_kg",
-            "lateral_friction",
-            "rolling_friction",
-            "spinning_friction",
-            "linear_damping",
-            "angular_damping",
-        ):
-            if getattr(self, name) < 0:
-                raise _bad(
-                    f"world.physics.*.{name}",
-                    getattr(self, name),
-                    "must be >= 0",
-                    f"set {name} to a non-negative value",
-                )
-        if not 0 <= self.restitution <= 1:
-            raise _bad("world.physics.*.restitution", self.restitution, "must be in [0, 1]", "use e.g. 0.1")
-
-
-def _default_physics() -> dict[str, ObjectPhysicsConfig]:
+def _default_physics() -> dict[str, PhysicsParams]:
     return {
-        "floor": ObjectPhysicsConfig(lateral_friction=1.0),
-        "structure": ObjectPhysicsConfig(lateral_friction=0.7),
-        "shelf": ObjectPhysicsConfig(lateral_friction=0.6),
-        "box": ObjectPhysicsConfig(mass_kg=30.0, lateral_friction=0.6, restitution=0.05),
-        "pallet": ObjectPhysicsConfig(mass_kg=25.0, lateral_friction=0.7, restitution=0.05),
+        "floor": PhysicsParams(lateral_friction=1.0),
+        "structure": PhysicsParams(lateral_friction=0.7),
+        "shelf": PhysicsParams(lateral_friction=0.6),
+        "box": PhysicsParams(mass_kg=30.0, lateral_friction=0.6, restitution=0.05),
+        "pallet": PhysicsParams(mass_kg=25.0, lateral_friction=0.7, restitution=0.05),
     }
 
 
@@ -127,7 +94,7 @@ class WorldConfig:
     physics_hz: int = 240
     gravity_mps2: float = 9.81
     settle_s: float = 2.0
-    physics: dict[str, ObjectPhysicsConfig] = field(default_factory=_default_physics)
+    physics: dict[str, PhysicsParams] = field(default_factory=_default_physics)
 
     def __post_init__(self) -> None:
         if _incomplete(self):

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from omegaconf import OmegaConf
 
 from simlan_data.algorithms import registry
-from simlan_data.algorithms.birdseye import CanvasSpec
+from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec
 from simlan_data.algorithms.birdseye_simlan import SimlanBirdseye
 from simlan_data.algorithms.birdseye_stitcher import GpssStitcher
 from simlan_data.algorithms.roles import StitcherContext
@@ -170,6 +170,50 @@ def _ground_truth(ctx: ReplayContext, spec: CanvasSpec) -> tuple[NDArray[np.uint
     return rgb, labels, load_layout(world_cfg.layout, world_cfg.fidelity)
 
 
+def _image_topics(ctx: ReplayContext, cams: dict[str, Any]) -> tuple[dict[str, str], dict[str, str]]:
+    """Find the colour and the semantic image topic of each camera: topic -> camera id."""
+    colour: dict[str, str] = {}
+    semantic: dict[str, str] = {}
+    for topic in ctx.reader.topics:
+        found = _TOPIC.match(topic)
+        if found and found.group(1) in cams:
+            (colour if found.group(2) == "image_raw" else semantic)[topic] = found.group(1)
+    return colour, semantic
+
+
+def _score(
+    ctx: ReplayContext,
+    spec: CanvasSpec,
+    cameras: list[Any],
+    views: BirdseyeStitcher | CameraViews,
+    evaluated: list[tuple[list[NDArray[np.uint8]], list[NDArray[np.uint8]], NDArray[np.uint8]]],
+    metrics: dict[str, float],
+) -> tuple[dict[str, dict[str, float]], NDArray[np.uint8]]:
+    """Score our canvases and SIMLAN's method against the orthographic ground truth; add to ``metrics``.
+
+    ``views``: where each camera sees the canvas (floor masks, seam error, coverage). Returns the
+    summary per method and the ground-truth image.
+    """
+    truth_rgb, truth_labels, layout = _ground_truth(ctx, spec)
+    simlan = SimlanBirdseye(cameras, spec)
+    evaluator = QualityEvaluator(spec, truth_rgb, truth_labels, ground_control_points(layout, spec))
+    for frames, labels, canvas in evaluated:
+        evaluator.begin_frame(stitcher_projections(views, labels, nearest=True))
+        evaluator.add("ours", canvas, views.coverage, stitcher_projections(views, frames))
+        per_cam = [(FULL, img, inside) for img, inside in zip(simlan.project_each(frames), simlan.inside)]
+        evaluator.add("simlan", simlan.stitch(frames), simlan.coverage, per_cam)
+    summary = evaluator.summary()
+    metrics["birdseye.eval_frames"] = float(len(evaluated))
+    metrics["birdseye.floor_fraction"] = float(np.mean(evaluator.floor_fraction))
+    for key, value in summary["ours"].items():
+        if key != "coverage":
+            metrics[f"birdseye.{key}"] = value
+    for key, value in summary["simlan"].items():
+        metrics[f"birdseye.simlan.{key}"] = value
+    metrics["birdseye.psnr_gain_db"] = summary["ours"]["psnr_grey_db"] - summary["simlan"]["psnr_grey_db"]
+    return summary, truth_rgb
+
+
 @register("birdseye")
 def birdseye(ctx: ReplayContext) -> dict[str, float]:
     """Stitch every frame of the recording, score some against ground truth, write a report."""
@@ -181,12 +225,7 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
         raise RecordingInputError(
             "recording has no cameras", str(ctx.reader.path), "no camera_info topics", "record with cameras"
         )
-    colour: dict[str, str] = {}
-    semantic: dict[str, str] = {}
-    for topic in ctx.reader.topics:
-        found = _TOPIC.match(topic)
-        if found and found.group(1) in cams:
-            (colour if found.group(2) == "image_raw" else semantic)[topic] = found.group(1)
+    colour, semantic = _image_topics(ctx, cams)
     ids = [c for c in cams if c in colour.values()]
     cameras = [cams[c] for c in ids]
     algorithm = settings.stitcher
@@ -244,24 +283,7 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
     summary: dict[str, dict[str, float]] = {}
     truth = None
     if with_truth and evaluated and spec.plane_z_m == 0.0:
-        truth_rgb, truth_labels, layout = _ground_truth(ctx, spec)
-        truth = truth_rgb
-        simlan = SimlanBirdseye(cameras, spec)
-        evaluator = QualityEvaluator(spec, truth_rgb, truth_labels, ground_control_points(layout, spec))
-        for frames, labels, canvas in evaluated:
-            evaluator.begin_frame(stitcher_projections(views, labels, nearest=True))
-            evaluator.add("ours", canvas, views.coverage, stitcher_projections(views, frames))
-            per_cam = [(FULL, img, inside) for img, inside in zip(simlan.project_each(frames), simlan.inside)]
-            evaluator.add("simlan", simlan.stitch(frames), simlan.coverage, per_cam)
-        summary = evaluator.summary()
-        metrics["birdseye.eval_frames"] = float(len(evaluated))
-        metrics["birdseye.floor_fraction"] = float(np.mean(evaluator.floor_fraction))
-        for key, value in summary["ours"].items():
-            if key != "coverage":
-                metrics[f"birdseye.{key}"] = value
-        for key, value in summary["simlan"].items():
-            metrics[f"birdseye.simlan.{key}"] = value
-        metrics["birdseye.psnr_gain_db"] = summary["ours"]["psnr_grey_db"] - summary["simlan"]["psnr_grey_db"]
+        summary, truth = _score(ctx, spec, cameras, views, evaluated, metrics)
     shown = evaluated[-1][2] if evaluated else last
     write_report(
         ctx.out_dir,

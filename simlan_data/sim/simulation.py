@@ -224,8 +224,12 @@ class Simulation:
         """Build the selected algorithm of ``role`` from its own config, as the replay does
         (guarded: an exception inside it names it and the simulated time)."""
         selected = getattr(self.cfg.algorithms, role)
-        spec = registry.resolve(role, selected.name)
-        config = spec.make_config(plain(selected), where=f"config algorithms.{role}")
+        if selected is None:  # a config composed without this role's group: the built-in, defaults
+            spec = registry.resolve(role, registry.DEFAULTS[role])
+            config = spec.make_config({}, where=f"config algorithms.{role}")
+        else:
+            spec = registry.resolve(role, selected.name)
+            config = spec.make_config(plain(selected), where=f"config algorithms.{role}")
         return lambda ctx: registry.Guarded(spec.build(config, ctx), spec)
 
     def _search(
