@@ -263,6 +263,12 @@ class Guarded:
     def __init__(self, inner: Any, spec: AlgorithmSpec) -> None:
         self._inner, self._spec, self._t_ns = inner, spec, None
 
+    def at(self, t_ns: int) -> Guarded:
+        """Tell the guard the simulated time of the next call (for methods that take no time,
+        such as ``stitch``), so that a failure names it: ``guarded.at(t_ns).stitch(frames)``."""
+        self._t_ns = t_ns
+        return self
+
     def __getattr__(self, attr: str) -> Any:
         value = getattr(self._inner, attr)
         if not callable(value) or attr.startswith("_"):

@@ -88,7 +88,7 @@ class BirdseyeRecorder:
             self.writer.write_pending(self.topic, stamp_ns, _Restamped(self._last, stamp_ns))
             return
         t0 = time.perf_counter()
-        canvas = self.stitcher.stitch([im.rgb for im in images])
+        canvas = self.stitcher.at(stamp_ns).stitch([im.rgb for im in images])  # (a failure names the time)
         self.stitch_wall_s += time.perf_counter() - t0
         self.canvases += 1
         encode = self._encode
