@@ -33,7 +33,7 @@ from simlan_data import __version__
 from simlan_data.algorithms import registry
 from simlan_data.algorithms.localization import ImageSearch
 from simlan_data.algorithms.roles import CameraFrame
-from simlan_data.algorithms.stack import AgentPlan, GpssStack, NavigationParams
+from simlan_data.algorithms.stack import AgentPlan, ControlOutput, GpssStack, NavigationParams
 from simlan_data.config.algorithms import plain
 from simlan_data.config.faults import CameraFaults
 from simlan_data.config.schema import Config
@@ -43,9 +43,10 @@ from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import messages as M
 from simlan_data.recording.cameras import camera_from_messages
 from simlan_data.recording.writer import NullWriter, RecordingWriter
+from simlan_data.sim.agent_base import CollisionReading
 from simlan_data.sim.birdseye_live import BirdseyeRecorder
 from simlan_data.sim.camera_recording import CameraRecorder
-from simlan_data.sim.posemap_drive import make_driver
+from simlan_data.sim.posemap_drive import PoseDriver, make_driver
 from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.sim.scene import Inputs, Scene
@@ -276,6 +277,31 @@ class Simulation:
     def _loop(
         self, scene: Scene, writer: RecordingWriter, stats: RunStats, progress: Callable[[float], None] | None
     ) -> None:
+        """Step the scene ``steps`` times, running each tick whose rate divides the step."""
+        run = self._start(scene, writer, stats)
+        dt_control = self.control_every / self.physics_hz
+        for step in range(self.steps + 1):
+            t = self.stamp_ns(step)
+            if step % self.truth_every == 0:
+                run.pub.ground_truth(t)
+            if run.driver is not None and step % self.control_every == 0:
+                run.driver.control_tick(t)  # before the cameras: the images at t show the pose at t
+            if step % self.camera_every == 0:
+                self._camera_tick(run, step, t)
+                if progress is not None:
+                    progress(t / NS_PER_S)
+            if step % self.control_every == 0:
+                self._control_tick(run, t, dt_control)
+            if step < self.steps:
+                self._physics_step(run)
+        stats.sim_duration_ns = self.stamp_ns(self.steps)
+        if run.driver is not None:
+            stats.extra_metrics.update(run.driver.finish())
+        stats.navigation = {ns: nav.status for ns, nav in run.stack.navigators.items()}
+        self.stack = run.stack
+
+    def _start(self, scene: Scene, writer: RecordingWriter, stats: RunStats) -> _Run:
+        """Publish the static messages and set up the stack, the recorders and the counters."""
         cfg = self.cfg
         pub = Publisher(writer, cfg, scene.agents)
         pub.static(config_yaml=self.config_yaml, renderer=scene.client.backend, cameras=scene.cameras)
@@ -294,97 +320,128 @@ class Simulation:
             stats.distance_m[a.namespace] = 0.0
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
-        birdseye = self.birdseye
-        driver = make_driver(
-            cfg, scene.agents, writer, self.inputs.posemap
-        )  # posed humanoid: motion files or the drive
-        ignore = scene.world.floor
-        dt_control = self.control_every / self.physics_hz
-        cid = scene.client.id
-        for step in range(self.steps + 1):
-            t = self.stamp_ns(step)
-            if step % self.truth_every == 0:
-                pub.ground_truth(t)
-            if driver is not None and step % self.control_every == 0:
-                driver.control_tick(t)  # before the cameras: the images at t show the pose at t
-            if step % self.camera_every == 0:
-                render0 = time.perf_counter()
-                scene.refresh_static_layers()
-                moved = scene.moved_boxes()
-                frames = []
-                encoded_of: dict[str, Any] = {}
-                for renderer in scene.renderers:
-                    camera = renderer.camera
-                    images = renderer.render(moved)
-                    stats.camera_frames += 1
-                    stats.camera_frames_changed += int(images.changed)
-                    encoded = recorder.record(t, step // self.camera_every, camera, images)
-                    plan = stack.search_plan(t, camera.camera_id)
-                    search = (
-                        None if plan is None else self._search(stack, writer, camera, plan, images, encoded)
-                    )
-                    frames.append((camera, images, plan, search))
-                    encoded_of[camera.camera_id] = encoded
-                if birdseye is not None:
-                    birdseye.tick(t, step // self.camera_every, [f[1] for f in frames])
-                if driver is not None:
-                    driver.camera_tick(t, step // self.camera_every, [(f[0], f[1]) for f in frames])
-                loc0 = time.perf_counter()
-                stats.render_wall_s += loc0 - render0
-                for camera, images, plan, search in frames:
-                    if plan is not None and search is not None:
-                        found = search.result()
-                        mode = stack.camera_detections(t, camera.camera_id, plan, found)
-                        pub.detections(t, camera, found.detections, mode)
-                    elif stack.wants_frames(camera.camera_id):
-                        stack.camera_image(self._frame(t, camera.camera_id, images, encoded_of[camera.camera_id]))
-                    stack.people_frame(camera.camera_id, images.labels)
-                stack.close_camera_tick(t)
-                if stack.last_people is not None:
-                    pub.people(t, stack.last_people)
-                stats.localize_wall_s += time.perf_counter() - loc0
-                if progress is not None:
-                    progress(t / NS_PER_S)
-            if step % self.control_every == 0:
-                truth = {}
-                for agent in scene.agents:
-                    pose = agent.pose()
-                    truth[agent.namespace] = (
-                        float(pose.translation[0]),
-                        float(pose.translation[1]),
-                        pose.yaw(),
-                    )
-                    xy = pose.translation[:2]
-                    stats.distance_m[agent.namespace] += float(np.linalg.norm(xy - last_xy[agent.namespace]))
-                    last_xy[agent.namespace] = xy.copy()
-                # sensed before the control step: the safety trees read this tick's contacts
-                hits = {agent.namespace: agent.collisions(ignore, scene.names) for agent in scene.agents}
-                contacts = {ns: (hit.max_force_n, tuple(hit.others)) for ns, hit in hits.items()}
-                n_events = len(stack.safety_events)
-                out = stack.control(t, dt_control, truth, contacts)
-                if stack.source == "camera":
-                    pub.estimates(t, out.estimates, stack.localized)
-                pub.safety(t, stack.safety_states(), stack.safety_events[n_events:])
-                for agent in scene.agents:
-                    ns = agent.namespace
-                    v, w = agent.apply_command(*out.commands.get(ns, (0.0, 0.0)))
-                    stack.localizer.command(t, ns, v, w)
-                    hit = hits[ns]
-                    if hit.in_collision and not in_contact[ns]:
-                        stats.collisions[ns] += 1
-                    in_contact[ns] = hit.in_collision
-                    pub.command(t, ns, v, w, hit)
-                    nav = stack.navigators.get(ns)
-                    if nav is not None:
-                        decision = out.decisions.get(ns)
-                        pub.navigation(t, ns, nav, decision.blocked_by if decision is not None else ())
-            if step < self.steps:
-                for agent in scene.agents:
-                    agent.step_kinematics(1.0 / self.physics_hz)
-                pb.stepSimulation(physicsClientId=cid)
-                stats.physics_steps += 1
-        stats.sim_duration_ns = self.stamp_ns(self.steps)
-        if driver is not None:
-            stats.extra_metrics.update(driver.finish())
-        stats.navigation = {ns: nav.status for ns, nav in stack.navigators.items()}
-        self.stack = stack
+        driver = make_driver(cfg, scene.agents, writer, self.inputs.posemap)  # motion files or the drive
+        return _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy)
+
+    def _camera_tick(self, run: _Run, step: int, t: int) -> None:
+        """Render and record every camera, then localize and detect people on the frames."""
+        render0 = time.perf_counter()
+        frames = self._render(run, step, t)
+        loc0 = time.perf_counter()
+        run.stats.render_wall_s += loc0 - render0
+        self._localize(run, t, frames)
+        run.stats.localize_wall_s += time.perf_counter() - loc0
+
+    def _render(self, run: _Run, step: int, t: int) -> list[_Frame]:
+        """Render each camera, record its images and start its marker search; feed the bird's-eye
+        stitcher and the posemap driver."""
+        scene, stats, stack = run.scene, run.stats, run.stack
+        scene.refresh_static_layers()
+        moved = scene.moved_boxes()
+        frames = []
+        for renderer in scene.renderers:
+            camera = renderer.camera
+            images = renderer.render(moved)
+            stats.camera_frames += 1
+            stats.camera_frames_changed += int(images.changed)
+            encoded = run.recorder.record(t, step // self.camera_every, camera, images)
+            plan = stack.search_plan(t, camera.camera_id)
+            search = None if plan is None else self._search(stack, run.writer, camera, plan, images, encoded)
+            frames.append(_Frame(camera, images, plan, search, encoded))
+        if self.birdseye is not None:
+            self.birdseye.tick(t, step // self.camera_every, [f.images for f in frames])
+        if run.driver is not None:
+            run.driver.camera_tick(t, step // self.camera_every, [(f.camera, f.images) for f in frames])
+        return frames
+
+    def _localize(self, run: _Run, t: int, frames: list[_Frame]) -> None:
+        """Hand the frames to the localizer and the person detector in camera order; publish
+        their detections."""
+        stack, pub = run.stack, run.pub
+        for f in frames:
+            camera = f.camera
+            if f.plan is not None and f.search is not None:
+                found = f.search.result()
+                mode = stack.camera_detections(t, camera.camera_id, f.plan, found)
+                pub.detections(t, camera, found.detections, mode)
+            elif stack.wants_frames(camera.camera_id):
+                stack.camera_image(self._frame(t, camera.camera_id, f.images, f.encoded))
+            stack.people_frame(camera.camera_id, f.images.labels)
+        stack.close_camera_tick(t)
+        if stack.last_people is not None:
+            pub.people(t, stack.last_people)
+
+    def _control_tick(self, run: _Run, t: int, dt_control: float) -> None:
+        """Sense poses and contacts, run the stack, drive the wheels and publish the tick."""
+        truth = self._truth(run)
+        # sensed before the control step: the safety trees read this tick's contacts
+        scene, stack, pub = run.scene, run.stack, run.pub
+        hits = {agent.namespace: agent.collisions(scene.world.floor, scene.names) for agent in scene.agents}
+        contacts = {ns: (hit.max_force_n, tuple(hit.others)) for ns, hit in hits.items()}
+        n_events = len(stack.safety_events)
+        out = stack.control(t, dt_control, truth, contacts)
+        if stack.source == "camera":
+            pub.estimates(t, out.estimates, stack.localized)
+        pub.safety(t, stack.safety_states(), stack.safety_events[n_events:])
+        self._drive(run, t, out, hits)
+
+    def _truth(self, run: _Run) -> dict[str, tuple[float, float, float]]:
+        """Read every agent's true pose and add the distance it moved since the last control tick."""
+        truth = {}
+        for agent in run.scene.agents:
+            pose = agent.pose()
+            truth[agent.namespace] = (float(pose.translation[0]), float(pose.translation[1]), pose.yaw())
+            xy = pose.translation[:2]
+            run.stats.distance_m[agent.namespace] += float(np.linalg.norm(xy - run.last_xy[agent.namespace]))
+            run.last_xy[agent.namespace] = xy.copy()
+        return truth
+
+    def _drive(self, run: _Run, t: int, out: ControlOutput, hits: dict[str, CollisionReading]) -> None:
+        """Apply each agent's command to its wheels, count new collisions, publish command and plan."""
+        stack, pub, stats = run.stack, run.pub, run.stats
+        for agent in run.scene.agents:
+            ns = agent.namespace
+            v, w = agent.apply_command(*out.commands.get(ns, (0.0, 0.0)))
+            stack.localizer.command(t, ns, v, w)
+            hit = hits[ns]
+            if hit.in_collision and not run.in_contact[ns]:
+                stats.collisions[ns] += 1
+            run.in_contact[ns] = hit.in_collision
+            pub.command(t, ns, v, w, hit)
+            nav = stack.navigators.get(ns)
+            if nav is not None:
+                decision = out.decisions.get(ns)
+                pub.navigation(t, ns, nav, decision.blocked_by if decision is not None else ())
+
+    def _physics_step(self, run: _Run) -> None:
+        """Advance the agents' kinematics and the physics by one step."""
+        for agent in run.scene.agents:
+            agent.step_kinematics(1.0 / self.physics_hz)
+        pb.stepSimulation(physicsClientId=run.scene.client.id)
+        run.stats.physics_steps += 1
+
+
+@dataclass
+class _Frame:
+    """One camera's frame in a camera tick: its images, its encoding and its marker search."""
+
+    camera: CameraModel
+    images: CameraImages
+    plan: str | list | None
+    search: Future[ImageSearch] | None
+    encoded: Any
+
+
+@dataclass
+class _Run:
+    """What the loop's ticks share: the scene, the bag, the stack, the recorders, the counters."""
+
+    scene: Scene
+    writer: RecordingWriter
+    stats: RunStats
+    pub: Publisher
+    stack: GpssStack
+    recorder: CameraRecorder
+    driver: PoseDriver | None
+    in_contact: dict[str, bool]
+    last_xy: dict[str, np.ndarray]
