@@ -2,84 +2,43 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+import lazy_loader
 
-# public name -> the submodule that defines it. Nothing is imported here: a name's module loads
-# on first use (PEP 562), so `import simlan_data.algorithms` stays light and free of pybullet.
-# roles and registry: see simlan_data.algorithms.roles / .registry
-_EXPORTS: dict[str, str] = {
-    "BirdseyeStitcher": "birdseye",
-    "CanvasSpec": "birdseye",
-    "SimlanBirdseye": "birdseye_simlan",
-    "Coordinator": "coordinator",
-    "Decision": "coordinator",
-    "Intent": "coordinator",
-    "DryRunResult": "dryrun",
-    "dry_run": "dryrun",
-    "FollowerParams": "follower",
-    "PathFollower": "follower",
-    "PursuitParams": "follower",
-    "WaypointFollower": "follower",
-    "Detection": "markers",
-    "MarkerDetector": "markers",
-    "MarkerMount": "markers",
-    "MarkerObservation": "markers",
-    "NavigationStatus": "navigation",
-    "Navigator": "navigation",
-    "OccupancyGrid": "occupancy",
-    "grid_from_nav2_map": "occupancy",
-    "grid_from_world": "occupancy",
-    "PeopleParams": "people",
-    "PersonDetection": "people",
-    "PersonDetector": "people",
-    "PersonTracker": "people",
-    "GridPlanner": "planner",
-    "Plan": "planner",
-    "PlanningError": "planner",
-}
-
-__all__ = [
-    "BirdseyeStitcher",
-    "CanvasSpec",
-    "Coordinator",
-    "Decision",
-    "Detection",
-    "DryRunResult",
-    "FollowerParams",
-    "GridPlanner",
-    "Intent",
-    "MarkerDetector",
-    "MarkerMount",
-    "MarkerObservation",
-    "NavigationStatus",
-    "Navigator",
-    "OccupancyGrid",
-    "PathFollower",
-    "PeopleParams",
-    "PersonDetection",
-    "PersonDetector",
-    "PersonTracker",
-    "Plan",
-    "PlanningError",
-    "PursuitParams",
-    "SimlanBirdseye",
-    "WaypointFollower",
-    "dry_run",
-    "grid_from_nav2_map",
-    "grid_from_world",
-]
-
-
-def __getattr__(name: str) -> Any:
-    """Import the defining module on first use of a public name (PEP 562)."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+# Each public name loads its submodule on first use (lazy_loader, PEP 562): importing the
+# subpackage stays light (no simulator, no torch until a name that needs them is used).
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "aruco_localizer": ["ArucoLocalizer"],
+        "birdseye": ["BirdseyeStitcher", "CanvasSpec"],
+        "birdseye_stitcher": ["GpssStitcher", "GpssStitcherConfig"],
+        "gpss_coordinator": ["GpssCoordinator", "GpssCoordinatorConfig"],
+        "localization": ["LocalizerParams", "PoseEstimate"],
+        "registry": ["ENTRY_POINT_GROUP", "AlgorithmSpec", "Guarded", "names", "resolve"],
+        "roles": [
+            "ROLES",
+            "CameraFrame",
+            "Coordinator",
+            "CoordinatorContext",
+            "Localizer",
+            "LocalizerContext",
+            "PoseMapper",
+            "PosemapContext",
+            "SafetyContext",
+            "SafetyMonitor",
+            "SearchingLocalizer",
+            "Stitcher",
+            "StitcherContext",
+        ],
+        "trained_posemap": ["TrainedPoseMapper"],
+        "birdseye_simlan": ["SimlanBirdseye"],
+        "coordinator": ["Decision", "Intent"],
+        "dryrun": ["DryRunResult", "dry_run"],
+        "follower": ["FollowerParams", "PathFollower", "PursuitParams", "WaypointFollower"],
+        "markers": ["Detection", "MarkerDetector", "MarkerMount", "MarkerObservation"],
+        "navigation": ["NavigationStatus", "Navigator"],
+        "occupancy": ["OccupancyGrid", "grid_from_nav2_map", "grid_from_world"],
+        "people": ["PeopleParams", "PersonDetection", "PersonDetector", "PersonTracker"],
+        "planner": ["GridPlanner", "Plan", "PlanningError"],
+    },
+)

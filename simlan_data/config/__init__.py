@@ -2,41 +2,16 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+import lazy_loader
 
-# public name -> the submodule that defines it. Nothing is imported here: a name's module loads
-# on first use (PEP 562), so `import simlan_data.config` stays light (hydra loads with the schema).
-_EXPORTS: dict[str, str] = {
-    "CollisionSetup": "collision",
-    "collision_setup": "collision",
-    "CameraFaults": "faults",
-    "Config": "schema",
-    "register_configs": "schema",
-    "compose_config": "validation",
-    "to_config": "validation",
-}
-
-__all__ = [
-    "CameraFaults",
-    "CollisionSetup",
-    "Config",
-    "collision_setup",
-    "compose_config",
-    "register_configs",
-    "to_config",
-]
-
-
-def __getattr__(name: str) -> Any:
-    """Import the defining module on first use of a public name (PEP 562)."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+# Each public name loads its submodule on first use (lazy_loader, PEP 562): importing the
+# subpackage stays light (no simulator, no torch until a name that needs them is used).
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "collision": ["CollisionSetup", "collision_setup"],
+        "faults": ["CameraFaults"],
+        "schema": ["Config", "register_configs"],
+        "validation": ["compose_config", "to_config"],
+    },
+)

@@ -2,63 +2,23 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+import lazy_loader
 
-# public name -> the submodule that defines it. Nothing is imported here: a name's module loads
-# on first use (PEP 562), so `import simlan_data.evaluation` stays light.
-_EXPORTS: dict[str, str] = {
-    "QualityEvaluator": "birdseye_metrics",
-    "CameraConsistency": "camera_health",
-    "recording_metrics": "localization_replay",
-    "localization_metrics": "metrics",
-    "navigation_metrics": "metrics",
-    "ReplayContext": "replay",
-    "write_report": "report",
-    "recording_safety_metrics": "safety_metrics",
-    "Interval": "stats",
-    "difference_interval": "stats",
-    "interval": "stats",
-    "Suite": "suite_spec",
-    "load_suite": "suite_spec",
-    "AggregateSweep": "sweep",
-    "aggregate": "sweep",
-    "collect_sweep": "sweep",
-    "SWEEP_REPORTS": "sweep_reports",
-    "register_sweep_report": "sweep_reports",
-}
-
-__all__ = [
-    "SWEEP_REPORTS",
-    "AggregateSweep",
-    "CameraConsistency",
-    "Interval",
-    "QualityEvaluator",
-    "ReplayContext",
-    "Suite",
-    "aggregate",
-    "collect_sweep",
-    "difference_interval",
-    "interval",
-    "load_suite",
-    "localization_metrics",
-    "navigation_metrics",
-    "recording_metrics",
-    "recording_safety_metrics",
-    "register_sweep_report",
-    "write_report",
-]
-
-
-def __getattr__(name: str) -> Any:
-    """Import the defining module on first use of a public name (PEP 562)."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+# Each public name loads its submodule on first use (lazy_loader, PEP 562): importing the
+# subpackage stays light (no simulator, no torch until a name that needs them is used).
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "birdseye_metrics": ["QualityEvaluator"],
+        "camera_health": ["CameraConsistency"],
+        "localization_replay": ["recording_metrics"],
+        "metrics": ["localization_metrics", "navigation_metrics"],
+        "replay": ["ReplayContext"],
+        "report": ["write_report"],
+        "safety_metrics": ["recording_safety_metrics"],
+        "stats": ["Interval", "difference_interval", "interval"],
+        "suite_spec": ["Suite", "load_suite"],
+        "sweep": ["AggregateSweep", "aggregate", "collect_sweep"],
+        "sweep_reports": ["SWEEP_REPORTS", "register_sweep_report"],
+    },
+)

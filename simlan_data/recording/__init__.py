@@ -2,47 +2,18 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+import lazy_loader
 
-# public name -> the submodule that defines it. Nothing is imported here: a name's module loads
-# on first use (PEP 562), so `import simlan_data.recording` stays light (rosbags and mcap load with the reader or the writer).
-_EXPORTS: dict[str, str] = {
-    "cameras_in_recording": "cameras",
-    "Message": "reader",
-    "RecordingReader": "reader",
-    "TopicInfo": "reader",
-    "RecoveryReport": "recover",
-    "resolve_bag": "recover",
-    "RunMarker": "run_marker",
-    "Salvage": "salvage",
-    "NullWriter": "writer",
-    "RecordingWriter": "writer",
-}
-
-__all__ = [
-    "Message",
-    "NullWriter",
-    "RecordingReader",
-    "RecordingWriter",
-    "RecoveryReport",
-    "RunMarker",
-    "Salvage",
-    "TopicInfo",
-    "cameras_in_recording",
-    "resolve_bag",
-]
-
-
-def __getattr__(name: str) -> Any:
-    """Import the defining module on first use of a public name (PEP 562)."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+# Each public name loads its submodule on first use (lazy_loader, PEP 562): importing the
+# subpackage stays light (no simulator, no torch until a name that needs them is used).
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "cameras": ["cameras_in_recording"],
+        "reader": ["Message", "RecordingReader", "TopicInfo"],
+        "recover": ["RecoveryReport", "resolve_bag"],
+        "run_marker": ["RunMarker"],
+        "salvage": ["Salvage"],
+        "writer": ["NullWriter", "RecordingWriter"],
+    },
+)

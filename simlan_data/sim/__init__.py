@@ -2,65 +2,28 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+import lazy_loader
 
-# public name -> the submodule that defines it. Nothing is imported here: a name's module loads
-# on first use (PEP 562), so `import simlan_data.sim` stays light (pybullet loads with the first module that needs it).
-_EXPORTS: dict[str, str] = {
-    "Agent": "agents",
-    "CollisionReading": "agents",
-    "DiffDriveAgent": "agents",
-    "StaticAgent": "agents",
-    "WalkerAgent": "agents",
-    "spawn_agent": "agents",
-    "PosedHumanoidAgent": "humanoid",
-    "generate_dataset": "posemap_dataset",
-    "PoseDriver": "posemap_drive",
-    "make_driver": "posemap_drive",
-    "Publisher": "publishing",
-    "Client": "pybullet_client",
-    "connect": "pybullet_client",
-    "CameraRenderer": "rendering",
-    "Inputs": "scene",
-    "Scene": "scene",
-    "load_inputs": "scene",
-    "RunStats": "simulation",
-    "Simulation": "simulation",
-}
-
-__all__ = [
-    "Agent",
-    "CameraRenderer",
-    "Client",
-    "CollisionReading",
-    "DiffDriveAgent",
-    "Inputs",
-    "PoseDriver",
-    "PosedHumanoidAgent",
-    "Publisher",
-    "RunStats",
-    "Scene",
-    "Simulation",
-    "StaticAgent",
-    "WalkerAgent",
-    "connect",
-    "generate_dataset",
-    "load_inputs",
-    "make_driver",
-    "spawn_agent",
-]
-
-
-def __getattr__(name: str) -> Any:
-    """Import the defining module on first use of a public name (PEP 562)."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+# Each public name loads its submodule on first use (lazy_loader, PEP 562): importing the
+# subpackage stays light (no simulator, no torch until a name that needs them is used).
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "agents": [
+            "Agent",
+            "CollisionReading",
+            "DiffDriveAgent",
+            "StaticAgent",
+            "WalkerAgent",
+            "spawn_agent",
+        ],
+        "humanoid": ["PosedHumanoidAgent"],
+        "posemap_dataset": ["generate_dataset"],
+        "posemap_drive": ["PoseDriver", "make_driver"],
+        "publishing": ["Publisher"],
+        "pybullet_client": ["Client", "connect"],
+        "rendering": ["CameraRenderer"],
+        "scene": ["Inputs", "Scene", "load_inputs"],
+        "simulation": ["RunStats", "Simulation"],
+    },
+)

@@ -2,61 +2,19 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+import lazy_loader
 
-# public name -> the submodule that defines it. Nothing is imported here: a name's module loads
-# on first use (PEP 562), so `import simlan_data.algorithms.posemap` stays light (torch loads with a model, not with the package).
-_EXPORTS: dict[str, str] = {
-    "PosemapConfig": "config",
-    "PoseDataset": "dataset",
-    "read_dataset": "dataset",
-    "resolve_dataset": "dataset",
-    "write_dataset": "dataset",
-    "PoseEstimator": "estimators",
-    "make_estimator": "estimators",
-    "mpjpe": "metrics",
-    "per_joint": "metrics",
-    "GBMMapper": "models",
-    "MLPMapper": "models",
-    "PoseMapper": "models",
-    "load_mapper": "models",
-    "load_motion": "motion",
-    "TrainedMapper": "training",
-    "train": "training",
-    "train_from_config": "training",
-}
-
-__all__ = [
-    "GBMMapper",
-    "MLPMapper",
-    "PoseDataset",
-    "PoseEstimator",
-    "PoseMapper",
-    "PosemapConfig",
-    "TrainedMapper",
-    "load_mapper",
-    "load_motion",
-    "make_estimator",
-    "mpjpe",
-    "per_joint",
-    "read_dataset",
-    "resolve_dataset",
-    "train",
-    "train_from_config",
-    "write_dataset",
-]
-
-
-def __getattr__(name: str) -> Any:
-    """Import the defining module on first use of a public name (PEP 562)."""
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+# Each public name loads its submodule on first use (lazy_loader, PEP 562): importing the
+# subpackage stays light (no simulator, no torch until a name that needs them is used).
+__getattr__, __dir__, __all__ = lazy_loader.attach(
+    __name__,
+    submod_attrs={
+        "config": ["PosemapConfig"],
+        "dataset": ["PoseDataset", "read_dataset", "resolve_dataset", "write_dataset"],
+        "estimators": ["PoseEstimator", "make_estimator"],
+        "metrics": ["mpjpe", "per_joint"],
+        "models": ["GBMMapper", "MLPMapper", "PoseMapper", "load_mapper"],
+        "motion": ["load_motion"],
+        "training": ["TrainedMapper", "train", "train_from_config"],
+    },
+)
