@@ -156,38 +156,33 @@ _SECTION_CLASSES: dict[str, type] = {
 }
 
 
+def _known_keys(kind: type, raw: dict[str, Any], where: str) -> None:
+    """Refuse a key ``kind`` does not have, naming it and the known ones."""
+    known = [f.name for f in dataclasses.fields(kind)]
+    unknown = sorted(set(raw) - set(known))
+    if unknown:
+        raise ConfigError(
+            f"unknown key {where}.{unknown[0]}", "config", f"known: {', '.join(known)}", "check the spelling"
+        )
+
+
 def _section(key: str, value: Any) -> Any:
     """A condition section from a dict (a recorded config, ``--set``): unknown keys refused."""
     kind = _SECTION_CLASSES[key]
     if isinstance(value, kind):
         return value
     raw = dict(value or {})
-    known = [f.name for f in dataclasses.fields(kind)]
-    unknown = sorted(set(raw) - set(known))
-    if unknown:
-        raise ConfigError(
-            f"unknown key {WHERE}.{key}.{unknown[0]}",
-            "config",
-            f"known: {', '.join(known)}",
-            "check the spelling",
-        )
+    _known_keys(kind, raw, f"{WHERE}.{key}")
     raw["namespaces"] = list(raw.get("namespaces") or ())
     return kind(**raw)
 
 
 def _zone(i: int, value: Any) -> ZoneConfig:
+    """A zone from a dict: unknown keys refused."""
     if isinstance(value, ZoneConfig):
         return value
     raw = dict(value or {})
-    known = [f.name for f in dataclasses.fields(ZoneConfig)]
-    unknown = sorted(set(raw) - set(known))
-    if unknown:
-        raise ConfigError(
-            f"unknown key {WHERE}.zones[{i}].{unknown[0]}",
-            "config",
-            f"known: {', '.join(known)}",
-            "check the spelling",
-        )
+    _known_keys(ZoneConfig, raw, f"{WHERE}.zones[{i}]")
     return ZoneConfig(
         str(raw.get("name", "")), list(raw.get("polygon") or []), list(raw.get("namespaces") or [])
     )
