@@ -52,6 +52,7 @@ from simlan_data.algorithms.safety import (
     FREE,
     STOP,
     Monitor,
+    Mover,
     RobotEstimate,
     RobotSpec,
     SafetyDecision,
@@ -101,6 +102,21 @@ class ControlOutput:
     safety: dict[str, SafetyDecision] = field(default_factory=dict)
 
 
+def _marker_mounts(agents: list[AgentPlan]) -> list[MarkerMount]:
+    """Where each marked robot carries its marker: the ones the localizer must find."""
+    return [
+        MarkerMount(
+            a.namespace,
+            a.marker_id,
+            MARKER_SIZE_M,
+            a.kind.marker_xyz[2],
+            (a.kind.marker_xyz[0], a.kind.marker_xyz[1]),
+        )
+        for a in agents
+        if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"
+    ]
+
+
 class GpssStack:
     """Localization, coordination and navigation for every agent of a run."""
 
@@ -122,17 +138,7 @@ class GpssStack:
     ) -> None:
         self.agents = {a.namespace: a for a in agents}
         self.grid, self.nav, self.source = grid, nav, source
-        mounts = [
-            MarkerMount(
-                a.namespace,
-                a.marker_id,
-                MARKER_SIZE_M,
-                a.kind.marker_xyz[2],
-                (a.kind.marker_xyz[0], a.kind.marker_xyz[1]),
-            )
-            for a in agents
-            if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"
-        ]
+        mounts = _marker_mounts(agents)
         self.cameras = cameras
         self.localized = [m.namespace for m in mounts]  # the robots the localizer must find
         make = localizer or (lambda ctx: ArucoLocalizer(LocalizerParams(), ctx))
@@ -144,13 +150,21 @@ class GpssStack:
         self._granted: set[str] = set()  # robots the coordinator let drive at the last decision
         # the last pose GPSS knew of every robot: its spawn pose until the cameras first see it
         self.last_known: dict[str, tuple[float, float, float]] = {a.namespace: a.pose for a in agents}
+        self._build_navigators(agents)
+        self._build_safety(agents, safety, control_period_s, camera_period_s, processing_delay_s)
+        self._speeds: dict[str, tuple[float, float]] = {}  # last command per robot (ground-truth source)
+        self._build_person_detector(people)
+
+    def _build_navigators(self, agents: list[AgentPlan]) -> None:
+        """Give every robot a navigator (planners shared per radius) and every person a walker."""
+        nav = self.nav
         self.navigators: dict[str, Navigator] = {}
         self.walkers: dict[str, WaypointFollower] = {}
         planners: dict[float, GridPlanner] = {}
         for a in agents:
             if a.kind.drive == "diff":
                 radius = round(a.kind.half_width_m + nav.clearance_m, 3)
-                planner = planners.setdefault(radius, GridPlanner(grid, radius_m=radius))
+                planner = planners.setdefault(radius, GridPlanner(self.grid, radius_m=radius))
                 pursuit = PursuitParams(
                     max_speed_mps=min(a.speed_mps, a.kind.max_speed_mps),
                     min_lookahead_m=0.6 * nav.lookahead_m,
@@ -165,6 +179,16 @@ class GpssStack:
                     FollowerParams(speed_mps=a.speed_mps, max_yaw_rate_rps=2.5, turn_in_place_rad=1.2),
                     loop=a.loop,
                 )
+
+    def _build_safety(
+        self,
+        agents: list[AgentPlan],
+        safety: Callable[[SafetyContext], Any] | None,
+        control_period_s: float,
+        camera_period_s: float,
+        processing_delay_s: float,
+    ) -> None:
+        """Describe every agent to the safety monitor (specs, static obstacles) and build it."""
         specs = {
             a.namespace: RobotSpec(
                 a.namespace,
@@ -188,7 +212,7 @@ class GpssStack:
             control_period_s,
             camera_period_s,
             processing_delay_s,
-            nav.coordination,
+            self.nav.coordination,
         )
         self.safety = safety(run) if safety is not None else None
         # the events published on /safety/events: the monitor's own (``events``) where it keeps
@@ -198,12 +222,13 @@ class GpssStack:
         self._derive_events = self.safety is not None and own_events is None
         self._safety_state: dict[str, SafetyDecision] = {}  # the last decision per robot
         self._cancelled: set[str] = set()
-        self._speeds: dict[str, tuple[float, float]] = {}  # last command per robot (ground-truth source)
-        # people carry no marker: GPSS finds them in the segmentation images (where there are any)
+
+    def _build_person_detector(self, people: PeopleParams | None) -> None:
+        """Build the person detector and tracker (people carry no marker: GPSS finds them in segmentation)."""
         self.people_params = people or PeopleParams(enabled=False)
         self.person_detector = (
-            PersonDetector(cameras, self.people_params)
-            if self.people_params.enabled and source == "camera" and self.walkers
+            PersonDetector(self.cameras, self.people_params)
+            if self.people_params.enabled and self.source == "camera" and self.walkers
             else None
         )
         self.person_tracker = PersonTracker(self.people_params)
@@ -280,12 +305,36 @@ class GpssStack:
         and steers robots only with ``source=ground_truth``; ``contacts`` are the robots' collision
         sensor readings (max force, bodies touched)."""
         out = ControlOutput()
+        poses = self._poses(t_ns, truth, out)
+        intents, people = self._intents(t_ns, poses, truth)
+        if self.nav.coordination:
+            out.decisions = self.coordinator.decide(t_ns, intents)
+            self._granted = {ns for ns, d in out.decisions.items() if d.speed_limit_mps is None}
+        if self.safety is not None and getattr(self.safety, "trees", True):
+            self._safety_step(t_ns, out, truth, contacts, people)
+        self._commands(out, poses, intents, truth, dt_s)
+        self._speeds = dict(out.commands)
+        return out
+
+    def _poses(
+        self, t_ns: int, truth: dict[str, tuple[float, float, float]], out: ControlOutput
+    ) -> dict[str, tuple[float, float, float]]:
+        """Read the robots' poses (the localizer's valid estimates, or ground truth) into last_known."""
         if self.source == "camera":
             out.estimates = self.localizer.estimate(t_ns)
             poses = {ns: (e.x_m, e.y_m, e.yaw_rad) for ns, e in out.estimates.items() if e.valid}
         else:
             poses = {ns: truth[ns] for ns in self.navigators}
         self.last_known.update(poses)
+        return poses
+
+    def _intents(
+        self,
+        t_ns: int,
+        poses: dict[str, tuple[float, float, float]],
+        truth: dict[str, tuple[float, float, float]],
+    ) -> tuple[list[Intent], list[Mover]]:
+        """Gather every robot's and person's intent for the coordinator, and the people seen."""
         intents = []
         for ns, nav in self.navigators.items():
             if ns in poses:
@@ -323,25 +372,43 @@ class GpssStack:
                     yields=False,
                 )
             )
-        if self.nav.coordination:
-            out.decisions = self.coordinator.decide(t_ns, intents)
-            self._granted = {ns for ns, d in out.decisions.items() if d.speed_limit_mps is None}
-        if self.safety is not None and getattr(self.safety, "trees", True):
-            world = SafetyWorld(
-                t_ns,
-                self.robot_estimates(out.estimates, truth),
-                dict(contacts or {}),
-                people,
-                {
-                    ns: (nav.plan.points_xy if nav.plan is not None else None)
-                    for ns, nav in self.navigators.items()
-                },
-                {ns: nav.goal is not None for ns, nav in self.navigators.items()},
-            )
-            out.safety = self.safety.step(world)
-            if self._derive_events:
-                self.safety_events.extend(transition_events(self._safety_state, out.safety, world))
-            self._safety_state.update(out.safety)
+        return intents, people
+
+    def _safety_step(
+        self,
+        t_ns: int,
+        out: ControlOutput,
+        truth: dict[str, tuple[float, float, float]],
+        contacts: dict[str, tuple[float, tuple[str, ...]]] | None,
+        people: list[Mover],
+    ) -> None:
+        """Build the safety world of this tick, step the monitor on it and record its events."""
+        assert self.safety is not None
+        world = SafetyWorld(
+            t_ns,
+            self.robot_estimates(out.estimates, truth),
+            dict(contacts or {}),
+            people,
+            {
+                ns: (nav.plan.points_xy if nav.plan is not None else None)
+                for ns, nav in self.navigators.items()
+            },
+            {ns: nav.goal is not None for ns, nav in self.navigators.items()},
+        )
+        out.safety = self.safety.step(world)
+        if self._derive_events:
+            self.safety_events.extend(transition_events(self._safety_state, out.safety, world))
+        self._safety_state.update(out.safety)
+
+    def _commands(
+        self,
+        out: ControlOutput,
+        poses: dict[str, tuple[float, float, float]],
+        intents: list[Intent],
+        truth: dict[str, tuple[float, float, float]],
+        dt_s: float,
+    ) -> None:
+        """Step every navigator under its safety decision and coordination, then every walker."""
         for ns, nav in self.navigators.items():
             guard = out.safety.get(ns, FREE)
             if guard.state == STOP:  # zero command, navigation cancelled (replanned on resume)
@@ -365,8 +432,6 @@ class GpssStack:
             x, y, yaw = truth[ns]
             cmd = walker.step(x, y, yaw, dt_s)
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
-        self._speeds = dict(out.commands)
-        return out
 
     def safety_states(self) -> dict[str, tuple[SafetyDecision, Monitor]]:
         """Every guarded robot's decision and state-topic values after the last control tick: the

@@ -333,8 +333,7 @@ class Simulation:
         run.stats.localize_wall_s += time.perf_counter() - loc0
 
     def _render(self, run: _Run, step: int, t: int) -> list[_Frame]:
-        """Render each camera, record its images and start its marker search; feed the bird's-eye
-        stitcher and the posemap driver."""
+        """Render, record and start searching each camera; feed the bird's-eye stitcher and the driver."""
         scene, stats, stack = run.scene, run.stats, run.stack
         scene.refresh_static_layers()
         moved = scene.moved_boxes()
@@ -355,8 +354,7 @@ class Simulation:
         return frames
 
     def _localize(self, run: _Run, t: int, frames: list[_Frame]) -> None:
-        """Hand the frames to the localizer and the person detector in camera order; publish
-        their detections."""
+        """Hand the frames to the localizer and person detector in camera order; publish detections."""
         stack, pub = run.stack, run.pub
         for f in frames:
             camera = f.camera
