@@ -14,6 +14,7 @@ import textwrap
 from importlib.metadata import entry_points
 from pathlib import Path
 
+import polars as pl
 import pytest
 import yaml
 from mcap.reader import make_reader
@@ -276,3 +277,37 @@ def test_an_exception_in_the_plugin_leaves_a_finalized_recording(
         summary = make_reader(f).get_summary()
     assert summary is not None and summary.statistics.message_count > 0
     assert not (run_dir / "RUNNING").exists(), "a finished recording needs no recovery marker"
+
+
+def test_the_example_plugin_is_scored_against_the_built_in_in_a_suite(tmp_path: Path) -> None:
+    """(5) the installed plug-in through a V&V suite: `evals --candidate algorithms/localizer=centroid`
+    simulates both sides over the same seeds (the candidate's robots steer on centroid's
+    estimates), replays each with its own localizer and writes the comparison."""
+    from test_evals_compare import tiny_suite
+
+    suite, out = tiny_suite(tmp_path), tmp_path / "out"
+    done = _run(
+        [
+            "mini",
+            "--file",
+            str(suite),
+            "--jobs",
+            "2",
+            "--out",
+            str(out),
+            "--candidate",
+            "algorithms/localizer=centroid",
+        ],
+        cwd=tmp_path,
+        module="simlan_data.evals",
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    cmp = pl.read_parquet(out / "compare.parquet")
+    ate = cmp.filter(pl.col("metric") == "localization.ate_xy_rmse_m", pl.col("source") == "localization")
+    assert ate["baseline_n"][0] == 2 and ate["candidate_n"][0] == 2
+    assert ate["diff"][0] != 0  # two different localizers: not the same estimates
+    # the candidate's runs recorded centroid as their localizer, the baseline's the built-in
+    for side, name in (("baseline", "aruco"), ("candidate", "centroid")):
+        config = _recorded_config(out / side / "runs" / "truck__s0" / "recording")
+        assert config["algorithms"]["localizer"]["name"] == name
+    assert "algorithms/localizer=centroid" in (out / "compare.md").read_text()
