@@ -77,7 +77,11 @@ def selected_localizer(
     overrides = {k: v for k, v in options.items() if k not in REPLAY_OPTIONS}
     name = options.get("localizer")
     return registry.from_config(
-        config, "localizer", name=None if name is None else str(name), overrides=overrides, where="replay --set"
+        config,
+        "localizer",
+        name=None if name is None else str(name),
+        overrides=overrides,
+        where="replay --set",
     )
 
 
@@ -354,26 +358,65 @@ def replay_localizer(
     spec, loc_config = selected
     context = LocalizerContext({c: cameras[c] for c in camera_order}, mounts)
     localizer = registry.Guarded(spec.build(loc_config, context), spec)
-    searching = searches(localizer)
     control_ns = round(NS_PER_S / float(config.get("control_rate_hz", 20.0)))
     duration_ns = round(float(config.get("duration_s", reader.duration_ns / NS_PER_S)) * NS_PER_S)
-    ticks = iter(range(0, duration_ns + 1, control_ns))
-    next_tick = next(ticks, None)
-    rows: dict[str, tuple[list, list]] = {m.namespace: ([], []) for m in mounts}
+    replay = _LocalizerReplay(
+        localizer, camera_order, [m.namespace for m in mounts], control_ns, duration_ns, consistency
+    )
+    #   reading process (or thread): bag -> (frame set, commands before the next one) --pipe-->
+    #   this thread: plan -> search (a worker thread and this one) -> observe in camera order ->
+    #   fuse -> control ticks
+    sets = (
+        reading
+        if reading is not None
+        else in_background(frame_sets(reader, camera_order, list(replay.rows), recorded), depth=4)
+    )
+    workers = max(1, min(8, os.cpu_count() or 1) - 1)  # (and this thread)
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="search") as pool:
+        for stamp_ns, jpegs, cmds in sets:
+            for t_ns, ns, v, w in cmds:
+                replay.commands.setdefault(t_ns, []).append((ns, v, w))
+            # (a reading process may read cameras the localizer was not given: a fault)
+            if stamp_ns is not None and any(c in jpegs for c in camera_order):
+                replay.frame_set(pool, stamp_ns, jpegs)
+    replay.control_until(duration_ns, inclusive=True)
+    return localizer, {ns: status_table(est, status) for ns, (est, status) in replay.rows.items()}
 
-    commands: dict[int, list[tuple[str, float, float]]] = {}
 
-    def control_until(t_ns: int, *, inclusive: bool) -> None:
-        nonlocal next_tick
-        while next_tick is not None and (next_tick < t_ns or (inclusive and next_tick == t_ns)):
-            est = localizer.estimate(next_tick)
-            for ns, v, w in commands.pop(next_tick, ()):
-                localizer.command(next_tick, ns, v, w)
-            for ns, (est_rows, status_rows) in rows.items():
+class _LocalizerReplay:
+    """The localizer fed as live: control ticks (estimate, commands) between frame sets."""
+
+    def __init__(
+        self,
+        localizer: Any,
+        camera_order: list[str],
+        namespaces: list[str],
+        control_ns: int,
+        duration_ns: int,
+        consistency: CameraConsistency | None,
+    ) -> None:
+        self.localizer, self.camera_order, self.consistency = localizer, camera_order, consistency
+        self.searching = searches(localizer)
+        self.ticks = iter(range(0, duration_ns + 1, control_ns))
+        self.next_tick = next(self.ticks, None)
+        self.rows: dict[str, tuple[list, list]] = {ns: ([], []) for ns in namespaces}
+        self.commands: dict[int, list[tuple[str, float, float]]] = {}
+
+    def control_until(self, t_ns: int, *, inclusive: bool) -> None:
+        """Run the control ticks before ``t_ns`` (or at it): estimate, record, pass the commands."""
+        localizer = self.localizer
+        while self.next_tick is not None and (
+            self.next_tick < t_ns or (inclusive and self.next_tick == t_ns)
+        ):
+            tick = self.next_tick
+            est = localizer.estimate(tick)
+            for ns, v, w in self.commands.pop(tick, ()):
+                localizer.command(tick, ns, v, w)
+            for ns, (est_rows, status_rows) in self.rows.items():
                 e = est.get(ns)
                 status_rows.append(
                     (
-                        next_tick,
+                        tick,
                         e is not None and e.observed,
                         e is not None and e.valid,
                         e.age_s if e is not None else -1.0,
@@ -381,20 +424,33 @@ def replay_localizer(
                 )
                 if e is not None and e.valid:
                     # scored as the live run is: from the yaw its recorded quaternion gives back
-                    est_rows.append((next_tick, e.x_m, e.y_m, yaw_as_recorded(e.yaw_rad)))
-            next_tick = next(ticks, None)
+                    est_rows.append((tick, e.x_m, e.y_m, yaw_as_recorded(e.yaw_rad)))
+            self.next_tick = next(self.ticks, None)
 
-    def flush_frame_set(pending_t: int, pending: dict[str, Any]) -> None:
+    def frame_set(self, pool: ThreadPoolExecutor, pending_t: int, pending: dict[str, Any]) -> None:
+        """Localize one frame set between the control ticks before it and the one at it."""
+        self.control_until(pending_t, inclusive=False)
+        localizer = self.localizer
+        ids = [cid for cid in self.camera_order if cid in pending]
+        if not self.searching:  # the localizer takes the frames whole, as live
+            localizer.observe(pending_t, {c: CameraFrame(c, pending_t, bytes(pending[c])) for c in ids})
+            self.control_until(pending_t, inclusive=True)
+            return
+        self._search(pool, pending_t, pending, ids)
+        localizer.close_frame(pending_t)
+        if self.consistency is not None and hasattr(localizer, "last_observations"):
+            self.consistency.add(localizer.last_observations)
+        self.control_until(pending_t, inclusive=True)
+
+    def _search(
+        self, pool: ThreadPoolExecutor, pending_t: int, pending: dict[str, Any], ids: list[str]
+    ) -> None:
+        """Search the planned images on the workers and this thread; observe them in camera order."""
         # the planned images of a frame set are decoded and searched, and the markers' poses
         # computed, on worker threads at once (Localizer.detect is a pure function; OpenCV
         # releases the GIL); what they found is taken in camera order, exactly as the live run
         # and process_image do
-        control_until(pending_t, inclusive=False)
-        ids = [cid for cid in camera_order if cid in pending]
-        if not searching:  # the localizer takes the frames whole, as live
-            localizer.observe(pending_t, {c: CameraFrame(c, pending_t, bytes(pending[c])) for c in ids})
-            control_until(pending_t, inclusive=True)
-            return
+        localizer = self.localizer
         planned = list(zip(ids, localizer.search_plans(pending_t, ids)))
         jobs = [
             (cid, plan, pool.submit(localizer.detect, cid, plan, jpeg=pending[cid]))
@@ -410,29 +466,6 @@ def replay_localizer(
             own[cid] = localizer.detect(cid, plan, jpeg=pending[cid])
         for cid, plan, job in jobs:
             localizer.observe_search(pending_t, cid, plan, own[cid] if cid in own else job.result())
-        localizer.close_frame(pending_t)
-        if consistency is not None and hasattr(localizer, "last_observations"):
-            consistency.add(localizer.last_observations)
-        control_until(pending_t, inclusive=True)
-
-    #   reading process (or thread): bag -> (frame set, commands before the next one) --pipe-->
-    #   this thread: plan -> search (a worker thread and this one) -> observe in camera order ->
-    #   fuse -> control ticks
-    sets = (
-        reading
-        if reading is not None
-        else in_background(frame_sets(reader, camera_order, list(rows), recorded), depth=4)
-    )
-    workers = max(1, min(8, os.cpu_count() or 1) - 1)  # (and this thread)
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="search") as pool:
-        for stamp_ns, jpegs, cmds in sets:
-            for t_ns, ns, v, w in cmds:
-                commands.setdefault(t_ns, []).append((ns, v, w))
-            # (a reading process may read cameras the localizer was not given: a fault)
-            if stamp_ns is not None and any(c in jpegs for c in camera_order):
-                flush_frame_set(stamp_ns, jpegs)
-    control_until(duration_ns, inclusive=True)
-    return localizer, {ns: status_table(est, status) for ns, (est, status) in rows.items()}
 
 
 @register("localization")
@@ -440,15 +473,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     """Recompute localization from the images; metrics against ground truth; estimates.parquet."""
     config = ctx.config
     selected = selected_localizer(config, ctx.options)
-    read_in = str(ctx.options.get("reader", READERS[0]))
-    if read_in not in READERS:
-        raise ConfigError(
-            f"unknown reader {read_in!r}",
-            "replay --set reader",
-            f"known: {', '.join(READERS)}",
-            "use auto",
-        )
-    read_in = choose_reader(read_in)
+    read_in = _reader_option(ctx.options)
     wall0 = time.perf_counter()
     consistency = CameraConsistency()
     mounts, _ = marker_mounts(config)
@@ -468,18 +493,51 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
         else contextlib.nullcontext()
     ) as reading:
         localizer, tables = replay_localizer(
-            ctx.reader, config, ctx.believed_cameras, selected, consistency, reading=reading, recorded=recorded
+            ctx.reader,
+            config,
+            ctx.believed_cameras,
+            selected,
+            consistency,
+            reading=reading,
+            recorded=recorded,
         )
     wall = time.perf_counter() - wall0
     # the recording's own topics (ground truth, live estimates, navigation): read on the way
     truth = recorded.truth_tables()
     visibility = {m.namespace: Visibility(ctx.cameras, kinds[m.namespace]) for m in mounts}
     metrics = localization_metrics(truth, tables, visibility)
-    frames = [t.seconds for t in getattr(localizer, "timings", [])]
     metrics.update(consistency.metrics("replay.localization."))
     metrics["replay.localization.wall_s"] = wall
     metrics["replay.localization.reading_process"] = float(in_process)  # (which reader auto took)
-    metrics["replay.localization.frames_processed"] = float(len(frames))
+    metrics.update(_frame_timings(localizer, ctx))
+    diffs = _diffs_to_live(tables, recorded.estimate_tables())
+    if diffs:
+        metrics["replay.localization.max_diff_to_live_m"] = max(diffs)
+    frames_out = [t.with_columns(pl.lit(ns).alias("namespace")) for ns, t in tables.items()]
+    if frames_out:
+        pl.concat(frames_out).write_parquet(ctx.out_dir / "estimates.parquet")
+    if ctx.options.get("navigation", True):
+        metrics.update(navigation_metrics(recorded, truth, drives))
+    return metrics
+
+
+def _reader_option(options: dict[str, Any]) -> str:
+    """Check the ``reader`` option and choose the reader it asks for."""
+    read_in = str(options.get("reader", READERS[0]))
+    if read_in not in READERS:
+        raise ConfigError(
+            f"unknown reader {read_in!r}",
+            "replay --set reader",
+            f"known: {', '.join(READERS)}",
+            "use auto",
+        )
+    return choose_reader(read_in)
+
+
+def _frame_timings(localizer: Any, ctx: ReplayContext) -> dict[str, float]:
+    """Summarize the localizer's frame timings (per mode) and write frame_timings.parquet."""
+    frames = [t.seconds for t in getattr(localizer, "timings", [])]
+    metrics = {"replay.localization.frames_processed": float(len(frames))}
     if frames:
         metrics["replay.localization.frame_ms_median"] = float(np.median(frames) * 1e3)
         for mode in ("full", "roi"):
@@ -498,7 +556,11 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
             },
             orient="row",
         ).write_parquet(ctx.out_dir / "frame_timings.parquet")
-    live = recorded.estimate_tables()
+    return metrics
+
+
+def _diffs_to_live(tables: dict[str, pl.DataFrame], live: dict[str, pl.DataFrame]) -> list[float]:
+    """Measure, per agent, the largest distance between the replayed and the live estimates."""
     diffs = []
     for ns, table in tables.items():
         joined = table.join(live[ns], on="stamp_ns", how="inner", suffix="_live").filter(
@@ -513,14 +575,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
                     ).max()
                 )
             )
-    if diffs:
-        metrics["replay.localization.max_diff_to_live_m"] = max(diffs)
-    frames_out = [t.with_columns(pl.lit(ns).alias("namespace")) for ns, t in tables.items()]
-    if frames_out:
-        pl.concat(frames_out).write_parquet(ctx.out_dir / "estimates.parquet")
-    if ctx.options.get("navigation", True):
-        metrics.update(navigation_metrics(recorded, truth, drives))
-    return metrics
+    return diffs
 
 
 def recording_metrics(reader: RecordingReader, config: dict[str, Any], cameras: dict) -> dict[str, float]:
