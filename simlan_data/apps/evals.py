@@ -310,25 +310,7 @@ def _mark_candidate(side_out: Path, candidate: list[str]) -> None:
 def run_compare(args: argparse.Namespace) -> int:
     """Baseline and candidate over the same seeds, then OUT/compare.md|parquet|csv."""
     suite = load_suite(args.file, args.suite, seeds=args.seeds)
-    for flag, on, why in (
-        ("--accept", args.accept, "a comparison accepts no baseline"),
-        ("--regenerate", args.regenerate, "a comparison regenerates no recordings"),
-        ("--inject", args.inject, "a comparison compares algorithms, not faults"),
-    ):
-        if on:
-            raise ConfigError(f"--candidate with {flag}", "arguments", why, "drop one of them")
-    check_launcher(args.launcher)
-    if args.jobs < 1:
-        raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
-    selected = [c for c in _select(suite, args.only) if not c.pending]
-    cases = [c for c in selected if c.recording is None]
-    if not cases:
-        raise ConfigError(
-            "nothing to compare",
-            f"suite {suite.name}",
-            "no simulated case (a fixed recording replays the algorithms it was recorded with)",
-            "pick simulated cases (e.g. suite base)",
-        )
+    selected, cases = _compared_cases(args, suite)
     reuse_dir = None
     if args.reuse is not None:
         nested = args.reuse / SIDES[0]
@@ -342,37 +324,8 @@ def run_compare(args: argparse.Namespace) -> int:
     tables: dict[str, pl.DataFrame] = {}
     failures: list[str] = []
     for side in SIDES:
-        side_out = out / side
-        side_out.mkdir()
-        jobs = plan_jobs(cases, side_out / "runs")
-        extra = [*args.set, *(args.candidate if side == "candidate" else [])]
-        print(
-            f"== {side}"
-            + (f": {' '.join(args.candidate)}" if side == "candidate" else ": the suite as it is")
-        )
-        if side == "baseline" and reuse_dir is not None:
-            reuse(jobs, suite, reuse_dir)
-            print(f"reusing the baseline runs of {reuse_dir}")
-        else:
-            try:
-                simulate(suite, jobs, [], side_out, launcher=args.launcher, n_jobs=args.jobs, extra=extra)
-            except SimlanError as err:  # every run failed: a result to report, not a crash
-                print(f"{side}: {err.line()}")
-                for j in jobs:
-                    j.error = j.error or err.line()
-        write_jobs_file(jobs, suite, [], side_out)
-        if side == "candidate":
-            _mark_candidate(side_out, list(args.candidate))
-        collect_run_metrics(jobs)
-        replay_all(jobs, [], side_out, n_jobs=args.jobs)
-        table = metrics_table(jobs)
-        write_tables(side_out, table, judge(suite, cases, jobs, table, read_baseline(suite.baseline)))
-        tables[side] = table
-        failures += [
-            f"{side}: {j.case.name} seed {j.seed}: {source}: {error}"
-            for j in jobs
-            for source, error in sorted({**({"run": j.error} if j.error else {}), **j.errors}.items())
-        ]
+        tables[side], side_failures = _run_side(args, suite, cases, side, out / side, reuse_dir)
+        failures += side_failures
     comparison = compare_tables(
         tables["baseline"], tables["candidate"], suite_checks(cases), suite.confidence
     )
@@ -392,6 +345,68 @@ def run_compare(args: argparse.Namespace) -> int:
         print(f"FAILED {f}")
     print(f"comparison: {path} (+ {path.with_suffix('.parquet').name}, {path.with_suffix('.csv').name})")
     return EXIT_FAILED_RUN if failures else 0
+
+
+def _compared_cases(args: argparse.Namespace, suite: Suite) -> tuple[list[Case], list[Case]]:
+    """Check the comparison's arguments; select the cases (all, and the simulated ones compared)."""
+    for flag, on, why in (
+        ("--accept", args.accept, "a comparison accepts no baseline"),
+        ("--regenerate", args.regenerate, "a comparison regenerates no recordings"),
+        ("--inject", args.inject, "a comparison compares algorithms, not faults"),
+    ):
+        if on:
+            raise ConfigError(f"--candidate with {flag}", "arguments", why, "drop one of them")
+    check_launcher(args.launcher)
+    if args.jobs < 1:
+        raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
+    selected = [c for c in _select(suite, args.only) if not c.pending]
+    cases = [c for c in selected if c.recording is None]
+    if not cases:
+        raise ConfigError(
+            "nothing to compare",
+            f"suite {suite.name}",
+            "no simulated case (a fixed recording replays the algorithms it was recorded with)",
+            "pick simulated cases (e.g. suite base)",
+        )
+    return selected, cases
+
+
+def _run_side(
+    args: argparse.Namespace,
+    suite: Suite,
+    cases: list[Case],
+    side: str,
+    side_out: Path,
+    reuse_dir: Path | None,
+) -> tuple[pl.DataFrame, list[str]]:
+    """Run (or reuse), replay and judge one side of the comparison; return its metrics and failures."""
+    side_out.mkdir()
+    jobs = plan_jobs(cases, side_out / "runs")
+    extra = [*args.set, *(args.candidate if side == "candidate" else [])]
+    print(f"== {side}" + (f": {' '.join(args.candidate)}" if side == "candidate" else ": the suite as it is"))
+    if side == "baseline" and reuse_dir is not None:
+        reuse(jobs, suite, reuse_dir)
+        print(f"reusing the baseline runs of {reuse_dir}")
+    else:
+        try:
+            simulate(suite, jobs, [], side_out, launcher=args.launcher, n_jobs=args.jobs, extra=extra)
+        except SimlanError as err:  # every run failed: a result to report, not a crash
+            print(f"{side}: {err.line()}")
+            for j in jobs:
+                j.error = j.error or err.line()
+    write_jobs_file(jobs, suite, [], side_out)
+    if side == "candidate":
+        _mark_candidate(side_out, list(args.candidate))
+    collect_run_metrics(jobs)
+    replay_all(jobs, [], side_out, n_jobs=args.jobs)
+    table = metrics_table(jobs)
+    write_tables(side_out, table, judge(suite, cases, jobs, table, read_baseline(suite.baseline)))
+    failures = [
+        f"{side}: {j.case.name} seed {j.seed}: {source}: {error}"
+        for j in jobs
+        for source, error in sorted({**({"run": j.error} if j.error else {}), **j.errors}.items())
+    ]
+    return table, failures
 
 
 def main(argv: list[str] | None = None) -> int:
