@@ -222,67 +222,21 @@ def read_safety_recording(reader: RecordingReader, config: dict[str, Any]) -> Sa
             "no robots", str(reader.path), "the run has no GPSS robot", "record a run with robots"
         )
     topics = {ns: schema.agent_topics(ns) for ns in specs}
-    ticks = np.array(
-        sorted({m.stamp_ns for m in reader.messages([topics[robots[0]]["cmd_vel"].name])}), dtype=np.int64
-    )
-    if len(ticks) == 0:
-        raise RecordingInputError(
-            "no commands", str(reader.path), "no /<ns>/cmd_vel messages", "record a GPSS run"
-        )
+    ticks = _control_ticks(reader, topics[robots[0]])
     n = len(ticks)
     pos = {int(t): i for i, t in enumerate(ticks)}
     truth_tables = ground_truth(reader)
     truth = {ns: _truth_at(truth_tables[ns], ticks) for ns in specs if ns in truth_tables}
-    commands = {ns: np.zeros((n, 2)) for ns in robots}
-    contacts: dict[str, list[tuple[float, tuple[str, ...]]]] = {ns: [(0.0, ())] * n for ns in robots}
-    plans: dict[str, list[NDArray[np.float64] | None]] = {ns: [None] * n for ns in robots}
-    nav_states: dict[str, list[str | None]] = {ns: [None] * n for ns in robots}
+    rows = {ns: _robot_rows(reader, topics[ns], pos, n) for ns in robots}
     estimates: dict[str, list[RobotEstimate]] = {}
-    states: dict[str, list[str]] = {}
-    loc_source = (config.get("localization") or {}).get("source", "camera")
-    for ns in robots:
-        tp = topics[ns]
-        for m in reader.messages([tp["cmd_vel"].name]):
-            commands[ns][pos[m.stamp_ns]] = (m.msg.twist.linear.x, m.msg.twist.angular.z)
-        for m in reader.messages([tp["collision"].name]):
-            if m.stamp_ns in pos:
-                contacts[ns][pos[m.stamp_ns]] = (float(m.msg.max_normal_force_n), tuple(m.msg.other_bodies))
-        for m in reader.messages([tp["plan"].name]):
-            if m.stamp_ns in pos:
-                plans[ns][pos[m.stamp_ns]] = np.array(
-                    [[p.pose.position.x, p.pose.position.y] for p in m.msg.poses]
-                )
-        for m in reader.messages([tp["navigation"].name]):
-            if m.stamp_ns in pos:
-                nav_states[ns][pos[m.stamp_ns]] = m.msg.state
-        st = [DRIVE] * n
-        seen = False
-        for m in reader.messages([tp["safety_state"].name]):
-            if m.stamp_ns in pos:
-                st[pos[m.stamp_ns]] = m.msg.state
-                seen = True
-        if seen:
-            states[ns] = st
-        if loc_source == "camera":
-            estimates[ns] = _estimates(reader, tp, pos, n, spawn[ns])
+    if (config.get("localization") or {}).get("source", "camera") == "camera":
+        estimates = {ns: _estimates(reader, topics[ns], pos, n, spawn[ns]) for ns in robots}
     people = [
         (m.stamp_ns, [(p.position.x, p.position.y) for p in m.msg.poses])
         for m in reader.messages([schema.PEOPLE_DETECTIONS])
     ]
     events = [event_of(m) for m in reader.messages([schema.SAFETY_EVENTS])]
-    marker_of = {
-        ns: int(a.get("marker_id") if a.get("marker_id") is not None else ns.rsplit("_", 1)[-1])
-        for ns, a in (config.get("agents") or {}).items()
-        if ns in robots
-    }
-    found: dict[str, set[int]] = {ns: set() for ns in robots}
-    det_topics = [t for t in reader.topics if t.endswith("/marker_detections")]
-    for m in reader.messages(det_topics):
-        for marker in {int(v) for v in m.msg.ids}:
-            for ns, mid in marker_of.items():
-                if mid == marker:
-                    found[ns].add(m.stamp_ns)
-    detections = {ns: np.array(sorted(v), dtype=np.int64) for ns, v in found.items()}
+    detections = _marker_detections(reader, config, robots)
     cam_rate = float((config.get("cameras") or {}).get("rate_hz", 5.0))
     camera_ns = round(NS_PER_S / cam_rate)
     camera_ticks = ticks[ticks % camera_ns == 0]
@@ -296,17 +250,84 @@ def read_safety_recording(reader: RecordingReader, config: dict[str, Any]) -> Sa
         ticks,
         camera_ticks,
         truth,
-        commands,
+        {ns: r.commands for ns, r in rows.items()},
         estimates,
-        contacts,
-        plans,
-        nav_states,
+        {ns: r.contacts for ns, r in rows.items()},
+        {ns: r.plans for ns, r in rows.items()},
+        {ns: r.nav_states for ns, r in rows.items()},
         people,
-        states,
+        {ns: r.states for ns, r in rows.items() if r.states is not None},
         events,
         detections=detections,
         zones_topic=schema.SAFETY_ZONES in reader.topics,
     )
+
+
+def _control_ticks(reader: RecordingReader, tp: dict[str, Any]) -> NDArray[np.int64]:
+    """Find the control ticks: the stamps of the first robot's commands."""
+    ticks = np.array(sorted({m.stamp_ns for m in reader.messages([tp["cmd_vel"].name])}), dtype=np.int64)
+    if len(ticks) == 0:
+        raise RecordingInputError(
+            "no commands", str(reader.path), "no /<ns>/cmd_vel messages", "record a GPSS run"
+        )
+    return ticks
+
+
+@dataclass
+class _RobotRows:
+    """One robot's recorded topics at the control ticks."""
+
+    commands: NDArray[np.float64]
+    contacts: list[tuple[float, tuple[str, ...]]]
+    plans: list[NDArray[np.float64] | None]
+    nav_states: list[str | None]
+    states: list[str] | None  # None: no safety state recorded
+
+
+def _robot_rows(reader: RecordingReader, tp: dict[str, Any], pos: dict[int, int], n: int) -> _RobotRows:
+    """Read one robot's commands, contacts, plans, navigation and safety states at the ticks."""
+    rows = _RobotRows(np.zeros((n, 2)), [(0.0, ())] * n, [None] * n, [None] * n, None)
+    for m in reader.messages([tp["cmd_vel"].name]):
+        rows.commands[pos[m.stamp_ns]] = (m.msg.twist.linear.x, m.msg.twist.angular.z)
+    for m in reader.messages([tp["collision"].name]):
+        if m.stamp_ns in pos:
+            rows.contacts[pos[m.stamp_ns]] = (float(m.msg.max_normal_force_n), tuple(m.msg.other_bodies))
+    for m in reader.messages([tp["plan"].name]):
+        if m.stamp_ns in pos:
+            rows.plans[pos[m.stamp_ns]] = np.array(
+                [[p.pose.position.x, p.pose.position.y] for p in m.msg.poses]
+            )
+    for m in reader.messages([tp["navigation"].name]):
+        if m.stamp_ns in pos:
+            rows.nav_states[pos[m.stamp_ns]] = m.msg.state
+    st = [DRIVE] * n
+    seen = False
+    for m in reader.messages([tp["safety_state"].name]):
+        if m.stamp_ns in pos:
+            st[pos[m.stamp_ns]] = m.msg.state
+            seen = True
+    if seen:
+        rows.states = st
+    return rows
+
+
+def _marker_detections(
+    reader: RecordingReader, config: dict[str, Any], robots: list[str]
+) -> dict[str, NDArray[np.int64]]:
+    """Collect, per robot, the stamps at which a camera found its marker."""
+    marker_of = {
+        ns: int(a.get("marker_id") if a.get("marker_id") is not None else ns.rsplit("_", 1)[-1])
+        for ns, a in (config.get("agents") or {}).items()
+        if ns in robots
+    }
+    found: dict[str, set[int]] = {ns: set() for ns in robots}
+    det_topics = [t for t in reader.topics if t.endswith("/marker_detections")]
+    for m in reader.messages(det_topics):
+        for marker in {int(v) for v in m.msg.ids}:
+            for ns, mid in marker_of.items():
+                if mid == marker:
+                    found[ns].add(m.stamp_ns)
+    return {ns: np.array(sorted(v), dtype=np.int64) for ns, v in found.items()}
 
 
 def _estimates(
