@@ -345,8 +345,16 @@ class BirdseyeStitcher:
         outside it: two cameras share a seam over 2 * band, symmetric about the region border.
         At most MAX_SEAM_CAMERAS cameras per pixel (the strongest), integer weights.
         """
+        primary, edge_factor = self._primary_regions()
+        self._coverage_and_density()
+        slot_w, slot_c = self._blend_weights(primary, edge_factor)
+        q = self._quantize(slot_w, slot_c)
+        self._primary_map()
+        self._seam_groups(q, slot_c, slot_w)
+
+    def _primary_regions(self) -> tuple[NDArray[np.int16], list[NDArray[np.float32] | None]]:
+        """Count the cameras per pixel; pick each pixel's primary camera and every camera's edge fade."""
         H, W = self.spec.height, self.spec.width
-        K = MAX_SEAM_CAMERAS
         band = self.band_px
         self.camera_count = np.zeros((H, W), dtype=np.uint8)
         best = np.zeros((H, W), dtype=np.float32)
@@ -365,11 +373,24 @@ class BirdseyeStitcher:
             better = eff > b
             b[better] = eff[better]
             p[better] = k
+        return primary, edge_factor
+
+    def _coverage_and_density(self) -> None:
+        """Mark the covered pixels and the density of the sharpest camera at each pixel."""
+        H, W = self.spec.height, self.spec.width
         self.coverage = self.camera_count > 0
         self.density = np.zeros((H, W), dtype=np.float32)  # of the sharpest camera at each pixel
         for fp in self.footprints:
             if fp is not None:
                 np.maximum(self.density[fp.rows, fp.cols], fp.density, out=self.density[fp.rows, fp.cols])
+
+    def _blend_weights(
+        self, primary: NDArray[np.int16], edge_factor: list[NDArray[np.float32] | None]
+    ) -> tuple[NDArray[np.float32], NDArray[np.int16]]:
+        """Weigh every camera by its ramp and fade; keep the strongest MAX_SEAM_CAMERAS per pixel."""
+        H, W = self.spec.height, self.spec.width
+        K = MAX_SEAM_CAMERAS
+        band = self.band_px
         slot_w = np.zeros((H, W, K), dtype=np.float32)
         slot_c = np.full((H, W, K), -1, dtype=np.int16)
         for k, fp in enumerate(self.footprints):
@@ -389,6 +410,11 @@ class BirdseyeStitcher:
             ti = (ii[0][take], ii[1][take], weakest[take])
             sw[ti] = w[m][take]
             sc[ti] = k
+        return slot_w, slot_c
+
+    def _quantize(self, slot_w: NDArray[np.float32], slot_c: NDArray[np.int16]) -> NDArray[np.int32]:
+        """Turn the weights into integers summing to WEIGHT_ONE; drop empty slots; set the primary."""
+        H, W = self.spec.height, self.spec.width
         total = slot_w.sum(axis=2, keepdims=True)
         with np.errstate(invalid="ignore", divide="ignore"):
             q = np.where(total > 0, np.rint(WEIGHT_ONE * slot_w / total), 0).astype(np.int32)
@@ -398,7 +424,11 @@ class BirdseyeStitcher:
         q[rr, cc, top[rr, cc]] += WEIGHT_ONE - q[rr, cc].sum(axis=1)
         slot_c[q == 0] = -1
         self.primary = np.where(total[..., 0] > 0, slot_c[np.arange(H)[:, None], np.arange(W), top], -1)
-        # one atlas map for every pixel, from its primary camera
+        return q
+
+    def _primary_map(self) -> None:
+        """Build one atlas map for every pixel, from its primary camera."""
+        H, W = self.spec.height, self.spec.width
         map_x = np.full((H, W), OUTSIDE, dtype=np.float32)
         map_y = np.full((H, W), OUTSIDE, dtype=np.float32)
         for k, fp in enumerate(self.footprints):
@@ -410,7 +440,12 @@ class BirdseyeStitcher:
             map_y[fp.rows, fp.cols][mine] = fp.map_y[mine] + dv
         self._primary_maps = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
         self._primary_float = (map_x, map_y)
-        # seam pixels: two or more cameras with a weight, grouped by how many (no wasted slots)
+
+    def _seam_groups(
+        self, q: NDArray[np.int32], slot_c: NDArray[np.int16], slot_w: NDArray[np.float32]
+    ) -> None:
+        """Group the seam pixels (two or more cameras with a weight) by how many cameras blend there."""
+        K = MAX_SEAM_CAMERAS
         n_cams = (q > 0).sum(axis=2).ravel()
         flat_q, flat_c, flat_w = q.reshape(-1, K), slot_c.reshape(-1, K), slot_w.reshape(-1, K)
         self.seams = []
