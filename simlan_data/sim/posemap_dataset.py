@@ -22,6 +22,7 @@ import logging
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -144,20 +145,7 @@ def _draw(rgb: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
 def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> dict[str, float]:
     """Generate ``posemap.samples`` samples into ``run_dir``; returns the metrics written."""
     pm = cfg.posemap
-    if pm.estimator == "mediapipe" and pm.occlusion == "rays":
-        raise ConfigError(
-            "invalid posemap.occlusion='rays'",
-            "config",
-            "MediaPipe needs rendered images",
-            "use posemap.occlusion=depth",
-        )
-    estimator: PoseEstimator = make_estimator(
-        pm.estimator,
-        seed=cfg.seed + 1,
-        noise_px=pm.noise_px,
-        hidden_noise_px=pm.hidden_noise_px,
-        mediapipe_python=pm.mediapipe_python,
-    )
+    estimator = _make_estimator(cfg)
     rays = pm.estimator == "projection" and pm.occlusion == "rays"
     t0 = time.perf_counter()
     rig = CaptureRig(cfg, need_images=not rays)
@@ -165,51 +153,23 @@ def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> di
     rng = np.random.default_rng(cfg.seed)
     q_all = sample_joints(rng, pm.samples, limit_scale=pm.limit_scale)
     lm = np.zeros((pm.samples, len(rig.cameras), NUM_LANDMARKS, 4), dtype=np.float32)
-    image_dir = run_dir / "images"
     t1 = time.perf_counter()
     try:
         with estimator:
-            for i in tqdm(
-                range(pm.samples), desc="posemap dataset", unit="sample", disable=None if progress else True
-            ):
-                views = rig.views(q_all[i], rays=rays)
-                lm[i] = estimator.estimate(views)
-                if i < pm.save_images and views[0].rgb is not None:
-                    image_dir.mkdir(parents=True, exist_ok=True)
-                    tiles = [_draw(v.rgb, lm[i, k]) for k, v in enumerate(views) if v.rgb is not None]
-                    cv2.imwrite(str(image_dir / f"sample_{i:05d}.png"), np.hstack(tiles))
+            _capture(cfg, rig, estimator, q_all, lm, run_dir / "images", rays=rays, progress=progress)
     finally:
         rig.close()
     loop_s = time.perf_counter() - t1
-    meta = {
-        "seed": cfg.seed,
-        "limit_scale": pm.limit_scale,
-        "occlusion": "rays" if rays else ("depth" if pm.estimator == "projection" else "n/a"),
-        "noise_px": pm.noise_px if pm.estimator == "projection" else None,
-        "hidden_noise_px": pm.hidden_noise_px if pm.estimator == "projection" else None,
-        "estimator_version": getattr(estimator, "version", ""),
-        "position": list(pm.position),
-        "renderer": rig.client.backend if not rays else "none (ray casts)",
-        "image_size": [cfg.cameras.width, cfg.cameras.height],
-        "world_fidelity": cfg.world.fidelity,
-        "camera_models": [camera_meta(c) for c in rig.cameras],
-    }
     data = PoseDataset(
-        np.arange(pm.samples), [c.camera_id for c in rig.cameras], lm, q_all, estimator.name, meta
+        np.arange(pm.samples),
+        [c.camera_id for c in rig.cameras],
+        lm,
+        q_all,
+        estimator.name,
+        _meta(cfg, rig, estimator, rays),
     )
     digest = write_dataset(run_dir, data)
-    visible = lm[..., 3] > 0.5
-    metrics: dict[str, float] = {
-        "posemap.dataset.samples": float(pm.samples),
-        "posemap.dataset.cameras": float(len(rig.cameras)),
-        "posemap.dataset.samples_per_s": pm.samples / loop_s if loop_s > 0 else 0.0,
-        "posemap.dataset.wall_s": loop_s,
-        "posemap.dataset.setup_s": setup_s,
-        "posemap.dataset.visible_fraction": float(visible.mean()),
-        "posemap.dataset.detected_fraction": float((lm[..., 3] > 0).any(axis=2).mean()),
-    }
-    for k, cam in enumerate(rig.cameras):
-        metrics[f"posemap.dataset.visible_fraction.{cam.camera_id}"] = float(visible[:, k].mean())
+    metrics = _dataset_metrics(cfg, rig, lm, loop_s, setup_s)
     (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
     print(
         "\n".join(
@@ -224,4 +184,85 @@ def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> di
         ),
         flush=True,
     )
+    return metrics
+
+
+def _make_estimator(cfg: Config) -> PoseEstimator:
+    """Check the estimator and occlusion settings and build the estimator."""
+    pm = cfg.posemap
+    if pm.estimator == "mediapipe" and pm.occlusion == "rays":
+        raise ConfigError(
+            "invalid posemap.occlusion='rays'",
+            "config",
+            "MediaPipe needs rendered images",
+            "use posemap.occlusion=depth",
+        )
+    return make_estimator(
+        pm.estimator,
+        seed=cfg.seed + 1,
+        noise_px=pm.noise_px,
+        hidden_noise_px=pm.hidden_noise_px,
+        mediapipe_python=pm.mediapipe_python,
+    )
+
+
+def _capture(
+    cfg: Config,
+    rig: CaptureRig,
+    estimator: PoseEstimator,
+    q_all: np.ndarray,
+    lm: np.ndarray,
+    image_dir: Path,
+    *,
+    rays: bool,
+    progress: bool,
+) -> None:
+    """Pose the humanoid for every sample, estimate its landmarks into ``lm``; save the first images."""
+    pm = cfg.posemap
+    for i in tqdm(
+        range(pm.samples), desc="posemap dataset", unit="sample", disable=None if progress else True
+    ):
+        views = rig.views(q_all[i], rays=rays)
+        lm[i] = estimator.estimate(views)
+        if i < pm.save_images and views[0].rgb is not None:
+            image_dir.mkdir(parents=True, exist_ok=True)
+            tiles = [_draw(v.rgb, lm[i, k]) for k, v in enumerate(views) if v.rgb is not None]
+            cv2.imwrite(str(image_dir / f"sample_{i:05d}.png"), np.hstack(tiles))
+
+
+def _meta(cfg: Config, rig: CaptureRig, estimator: PoseEstimator, rays: bool) -> dict[str, Any]:
+    """Describe how the dataset was made (seed, occlusion, noise, renderer, cameras)."""
+    pm = cfg.posemap
+    return {
+        "seed": cfg.seed,
+        "limit_scale": pm.limit_scale,
+        "occlusion": "rays" if rays else ("depth" if pm.estimator == "projection" else "n/a"),
+        "noise_px": pm.noise_px if pm.estimator == "projection" else None,
+        "hidden_noise_px": pm.hidden_noise_px if pm.estimator == "projection" else None,
+        "estimator_version": getattr(estimator, "version", ""),
+        "position": list(pm.position),
+        "renderer": rig.client.backend if not rays else "none (ray casts)",
+        "image_size": [cfg.cameras.width, cfg.cameras.height],
+        "world_fidelity": cfg.world.fidelity,
+        "camera_models": [camera_meta(c) for c in rig.cameras],
+    }
+
+
+def _dataset_metrics(
+    cfg: Config, rig: CaptureRig, lm: np.ndarray, loop_s: float, setup_s: float
+) -> dict[str, float]:
+    """Measure the dataset: size, speed, visible and detected fractions (overall and per camera)."""
+    pm = cfg.posemap
+    visible = lm[..., 3] > 0.5
+    metrics: dict[str, float] = {
+        "posemap.dataset.samples": float(pm.samples),
+        "posemap.dataset.cameras": float(len(rig.cameras)),
+        "posemap.dataset.samples_per_s": pm.samples / loop_s if loop_s > 0 else 0.0,
+        "posemap.dataset.wall_s": loop_s,
+        "posemap.dataset.setup_s": setup_s,
+        "posemap.dataset.visible_fraction": float(visible.mean()),
+        "posemap.dataset.detected_fraction": float((lm[..., 3] > 0).any(axis=2).mean()),
+    }
+    for k, cam in enumerate(rig.cameras):
+        metrics[f"posemap.dataset.visible_fraction.{cam.camera_id}"] = float(visible[:, k].mean())
     return metrics
