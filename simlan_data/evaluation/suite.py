@@ -34,8 +34,8 @@ from omegaconf import OmegaConf
 
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from simlan_data.errors import ConfigError, SimlanError
-from simlan_data.evaluation.stats import baseline_change, bound_ok, difference_interval, interval
-from simlan_data.evaluation.suite_spec import RUN_SOURCE, Case, Fault, Suite
+from simlan_data.evaluation.stats import Interval, baseline_change, bound_ok, difference_interval, interval
+from simlan_data.evaluation.suite_spec import RUN_SOURCE, Case, Check, Fault, Suite
 
 JOB_GROUP = "vv_job"
 JOBS_FILE = "jobs.json"
@@ -434,88 +434,104 @@ def _fmt(v: float) -> float | None:
     return None if v is None or math.isnan(v) else v
 
 
+JUDGE_SCHEMA = {
+    "case": pl.String,
+    "source": pl.String,
+    "metric": pl.String,
+    "n": pl.Int64,
+    "mean": pl.Float64,
+    "ci_low": pl.Float64,
+    "ci_high": pl.Float64,
+    "bound": pl.String,
+    "baseline_mean": pl.Float64,
+    "tolerance": pl.Float64,
+    "diff_low": pl.Float64,
+    "diff_high": pl.Float64,
+    "comparison": pl.String,
+    "verdict": pl.String,
+    "note": pl.String,
+}
+
+
 def judge(
     suite: Suite, cases: list[Case], jobs: list[Job], table: pl.DataFrame, baseline: pl.DataFrame
 ) -> pl.DataFrame:
     """One row per (case, source, metric): interval, bound, baseline difference, verdict."""
-    rows = []
     by_case: dict[str, list[Job]] = {}
     for job in jobs:
         by_case.setdefault(job.case.name, []).append(job)
-    for case in cases:
-        for check in case.checks:
-            row: dict[str, Any] = {
-                "case": case.name,
-                "source": check.source,
-                "metric": check.metric,
-                "bound": check.bound.describe(),
-                "tolerance": check.bound.allowed_change(float("nan")),
-            }
-            if case.pending:
-                rows.append({**row, "verdict": "pending", "note": f"pending: {case.pending}"})
-                continue
-            current = _values(table, case.name, check.source, check.metric)
-            errors = sorted(
-                {
-                    f"seed {j.seed}: {j.errors.get(check.source) or j.error}"
-                    for j in by_case.get(case.name, [])
-                    if check.source in j.errors or j.error
-                }
-            )
-            iv = interval(list(current.values()), suite.confidence)
-            row.update(n=iv.n, mean=_fmt(iv.mean), ci_low=_fmt(iv.low), ci_high=_fmt(iv.high))
-            base = _values(baseline, case.name, check.source, check.metric)
-            base_iv = interval(list(base.values()), suite.confidence)
-            row["baseline_mean"] = _fmt(base_iv.mean)
-            tol = check.bound.allowed_change(base_iv.mean)
-            row["tolerance"] = tol
-            if errors:
-                rows.append({**row, "verdict": "error", "note": "; ".join(errors)[:500]})
-                continue
-            if len(current) < len(case.seeds):
-                rows.append(
-                    {**row, "verdict": "missing", "note": f"{check.source} did not report {check.metric}"}
-                )
-                continue
-            notes = []
-            verdict = "pass"
-            if (check.bound.max is not None or check.bound.min is not None) and not bound_ok(check.bound, iv):
-                verdict = "fail"
-                notes.append(f"interval [{iv.low:.4g}, {iv.high:.4g}] not within {check.bound.describe()}")
-            if base and tol is not None:
-                diff, how = difference_interval(current, base, suite.confidence)
-                row.update(diff_low=_fmt(diff.low), diff_high=_fmt(diff.high), comparison=how)
-                change = baseline_change(check.bound, diff, base_iv.mean)
-                if change == "regression":
-                    notes.append(
-                        f"worse than baseline by [{diff.low:+.4g}, {diff.high:+.4g}] ({how}) beyond {tol:g}"
-                    )
-                    verdict = "regression" if verdict == "pass" else verdict
-                elif change == "improved":
-                    notes.append(
-                        f"better than baseline by [{diff.low:+.4g}, {diff.high:+.4g}]: --accept to keep it"
-                    )
-            elif tol is not None:
-                notes.append("no baseline yet (--accept)")
-            rows.append({**row, "verdict": verdict, "note": "; ".join(notes)})
-    schema = {
-        "case": pl.String,
-        "source": pl.String,
-        "metric": pl.String,
-        "n": pl.Int64,
-        "mean": pl.Float64,
-        "ci_low": pl.Float64,
-        "ci_high": pl.Float64,
-        "bound": pl.String,
-        "baseline_mean": pl.Float64,
-        "tolerance": pl.Float64,
-        "diff_low": pl.Float64,
-        "diff_high": pl.Float64,
-        "comparison": pl.String,
-        "verdict": pl.String,
-        "note": pl.String,
+    rows = [
+        _judge_check(suite, case, check, by_case.get(case.name, []), table, baseline)
+        for case in cases
+        for check in case.checks
+    ]
+    return pl.DataFrame([{k: r.get(k) for k in JUDGE_SCHEMA} for r in rows], schema=JUDGE_SCHEMA)
+
+
+def _judge_check(
+    suite: Suite, case: Case, check: Check, jobs: list[Job], table: pl.DataFrame, baseline: pl.DataFrame
+) -> dict[str, Any]:
+    """Judge one check of a case: its interval, its baseline, then its verdict."""
+    row: dict[str, Any] = {
+        "case": case.name,
+        "source": check.source,
+        "metric": check.metric,
+        "bound": check.bound.describe(),
+        "tolerance": check.bound.allowed_change(float("nan")),
     }
-    return pl.DataFrame([{k: r.get(k) for k in schema} for r in rows], schema=schema)
+    if case.pending:
+        return {**row, "verdict": "pending", "note": f"pending: {case.pending}"}
+    current = _values(table, case.name, check.source, check.metric)
+    errors = sorted(
+        {
+            f"seed {j.seed}: {j.errors.get(check.source) or j.error}"
+            for j in jobs
+            if check.source in j.errors or j.error
+        }
+    )
+    iv = interval(list(current.values()), suite.confidence)
+    row.update(n=iv.n, mean=_fmt(iv.mean), ci_low=_fmt(iv.low), ci_high=_fmt(iv.high))
+    base = _values(baseline, case.name, check.source, check.metric)
+    base_iv = interval(list(base.values()), suite.confidence)
+    row["baseline_mean"] = _fmt(base_iv.mean)
+    tol = check.bound.allowed_change(base_iv.mean)
+    row["tolerance"] = tol
+    if errors:
+        return {**row, "verdict": "error", "note": "; ".join(errors)[:500]}
+    if len(current) < len(case.seeds):
+        return {**row, "verdict": "missing", "note": f"{check.source} did not report {check.metric}"}
+    verdict, notes = _verdict(suite, check, row, iv, current, base, base_iv, tol)
+    return {**row, "verdict": verdict, "note": "; ".join(notes)}
+
+
+def _verdict(
+    suite: Suite,
+    check: Check,
+    row: dict[str, Any],
+    iv: Interval,
+    current: dict[int, float],
+    base: dict[int, float],
+    base_iv: Interval,
+    tol: float | None,
+) -> tuple[str, list[str]]:
+    """Hold the interval to the bound and the values to the baseline (its difference goes into ``row``)."""
+    notes = []
+    verdict = "pass"
+    if (check.bound.max is not None or check.bound.min is not None) and not bound_ok(check.bound, iv):
+        verdict = "fail"
+        notes.append(f"interval [{iv.low:.4g}, {iv.high:.4g}] not within {check.bound.describe()}")
+    if base and tol is not None:
+        diff, how = difference_interval(current, base, suite.confidence)
+        row.update(diff_low=_fmt(diff.low), diff_high=_fmt(diff.high), comparison=how)
+        change = baseline_change(check.bound, diff, base_iv.mean)
+        if change == "regression":
+            notes.append(f"worse than baseline by [{diff.low:+.4g}, {diff.high:+.4g}] ({how}) beyond {tol:g}")
+            verdict = "regression" if verdict == "pass" else verdict
+        elif change == "improved":
+            notes.append(f"better than baseline by [{diff.low:+.4g}, {diff.high:+.4g}]: --accept to keep it")
+    elif tol is not None:
+        notes.append("no baseline yet (--accept)")
+    return verdict, notes
 
 
 def accepted(table: pl.DataFrame, cases: list[Case], baseline: pl.DataFrame) -> pl.DataFrame:
