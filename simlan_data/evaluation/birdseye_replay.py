@@ -27,7 +27,7 @@ import dataclasses
 import math
 import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, cast
 
@@ -214,11 +214,76 @@ def _score(
     return summary, truth_rgb
 
 
+Evaluated = list[tuple[list[NDArray[np.uint8]], list[NDArray[np.uint8]], NDArray[np.uint8]]]
+
+
+@dataclass
+class _Stitched:
+    """What one pass over the recording's frame sets gave."""
+
+    seconds: float = 0.0
+    canvases: int = 0
+    last: NDArray[np.uint8] | None = None
+    evaluated: Evaluated = field(default_factory=list)  # (frames, labels, canvas) to score
+
+
+def _stitch_recording(
+    ctx: ReplayContext,
+    stitcher: Any,
+    ids: list[str],
+    colour: dict[str, str],
+    semantic: dict[str, str],
+    wanted: set[int],
+) -> _Stitched:
+    """Stitch every complete frame set in time order; keep the ``wanted`` labelled ones."""
+    out = _Stitched()
+    labelled_seen = 0
+    group: dict[tuple[str, str], Message] = {}
+    stamp: int | None = None
+
+    def flush() -> None:
+        nonlocal labelled_seen
+        rgb = [group.get(("rgb", c)) for c in ids]
+        if any(f is None for f in rgb):
+            return
+        frames = [_decode(f) for f in rgb if f is not None]
+        t0 = time.perf_counter()
+        out.last = stitcher.stitch(frames)
+        out.seconds += time.perf_counter() - t0
+        out.canvases += 1
+        labels = [group.get(("sem", c)) for c in ids]
+        if all(lab is not None for lab in labels):
+            if labelled_seen in wanted:
+                out.evaluated.append((frames, [_decode(lab) for lab in labels if lab is not None], out.last))
+            labelled_seen += 1
+
+    for msg in ctx.reader.messages([*colour, *semantic]):
+        if msg.stamp_ns != stamp:
+            flush()
+            group, stamp = {}, msg.stamp_ns
+        slot = ("rgb", colour[msg.topic]) if msg.topic in colour else ("sem", semantic[msg.topic])
+        group[slot] = msg
+    flush()
+    return out
+
+
+def _frames_to_score(
+    ctx: ReplayContext, semantic: dict[str, str], ids: list[str], eval_frames: int
+) -> set[int]:
+    """Indices of the labelled frame sets to score: ``eval_frames`` spread evenly over them."""
+    labelled_count = min((ctx.reader.topics[t].count for t in semantic), default=0)
+    if len(semantic) < len(ids):
+        labelled_count = 0
+    return set(
+        np.linspace(0, labelled_count - 1, min(eval_frames, labelled_count)).round().astype(int).tolist()
+    )
+
+
 @register("birdseye")
 def birdseye(ctx: ReplayContext) -> dict[str, float]:
     """Stitch every frame of the recording, score some against ground truth, write a report."""
     settings = birdseye_settings(ctx)
-    cfg, eval_frames, with_truth = settings.birdseye, settings.eval_frames, settings.ground_truth
+    cfg, with_truth = settings.birdseye, settings.ground_truth
     spec = cfg.canvas(where="replay --set")
     cams = dict(sorted(ctx.believed_cameras.items(), key=lambda kv: (len(kv[0]), kv[0])))
     if not cams:
@@ -235,46 +300,13 @@ def birdseye(ctx: ReplayContext) -> dict[str, float]:
     # where each camera sees the canvas: the stitcher's own tables if it has them (the built-in)
     own = callable(getattr(stitcher, "project_each", None)) and hasattr(stitcher, "coverage")
     views = stitcher if own else CameraViews(cameras, spec)
-    labelled_count = min((ctx.reader.topics[t].count for t in semantic), default=0)
-    if len(semantic) < len(ids):
-        labelled_count = 0
-    wanted = set(
-        np.linspace(0, labelled_count - 1, min(eval_frames, labelled_count)).round().astype(int).tolist()
-    )
-
-    stitch_s, n_canvases, last = 0.0, 0, None
-    evaluated: list[tuple[list[NDArray[np.uint8]], list[NDArray[np.uint8]], NDArray[np.uint8]]] = []
-    labelled_seen = 0
-    group: dict[tuple[str, str], Message] = {}
-    stamp: int | None = None
-
-    def flush() -> None:
-        nonlocal stitch_s, n_canvases, last, labelled_seen
-        rgb = [group.get(("rgb", c)) for c in ids]
-        if any(f is None for f in rgb):
-            return
-        frames = [_decode(f) for f in rgb if f is not None]
-        t0 = time.perf_counter()
-        last = stitcher.stitch(frames)
-        stitch_s += time.perf_counter() - t0
-        n_canvases += 1
-        labels = [group.get(("sem", c)) for c in ids]
-        if all(lab is not None for lab in labels):
-            if labelled_seen in wanted:
-                evaluated.append((frames, [_decode(lab) for lab in labels if lab is not None], last))
-            labelled_seen += 1
-
-    for msg in ctx.reader.messages([*colour, *semantic]):
-        if msg.stamp_ns != stamp:
-            flush()
-            group, stamp = {}, msg.stamp_ns
-        slot = ("rgb", colour[msg.topic]) if msg.topic in colour else ("sem", semantic[msg.topic])
-        group[slot] = msg
-    flush()
+    wanted = _frames_to_score(ctx, semantic, ids, settings.eval_frames)
+    done = _stitch_recording(ctx, stitcher, ids, colour, semantic, wanted)
+    evaluated, last = done.evaluated, done.last
 
     metrics: dict[str, float] = {
-        "birdseye.canvases": float(n_canvases),
-        "birdseye.canvases_per_s": n_canvases / stitch_s if stitch_s > 0 else 0.0,
+        "birdseye.canvases": float(done.canvases),
+        "birdseye.canvases_per_s": done.canvases / done.seconds if done.seconds > 0 else 0.0,
         "birdseye.coverage": float(views.coverage.mean()),
         "birdseye.cameras": float(len(cameras)),
     }
