@@ -506,7 +506,8 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     truth = recorded.truth_tables()
     visibility = {m.namespace: Visibility(ctx.cameras, kinds[m.namespace]) for m in mounts}
     metrics = localization_metrics(truth, tables, visibility)
-    metrics.update(consistency.metrics("replay.localization."))
+    if hasattr(localizer, "last_observations"):  # per-camera marker poses: the camera-health metrics
+        metrics.update(consistency.metrics("replay.localization."))
     metrics["replay.localization.wall_s"] = wall
     metrics["replay.localization.reading_process"] = float(in_process)  # (which reader auto took)
     metrics.update(_frame_timings(localizer, ctx))
