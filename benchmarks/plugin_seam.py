@@ -72,7 +72,9 @@ def _messages(bag: Path) -> list[tuple[str, int, bytes]]:
 def _same_depth_pixels(a: bytes, b: bytes) -> bool:
     """compressedDepth: CDR header + format + 12-byte depth header + PNG; compare the PNGs' pixels."""
     ia, ib = a.find(b"\x89PNG"), b.find(b"\x89PNG")
-    if ia < 0 or ib < 0 or a[:ia] != b[:ib]:
+    if (
+        ia < 0 or ib < 0 or a[: ia - 16] != b[: ib - 16]
+    ):  # (the CDR byte count before the depth header differs)
         return False
     da = cv2.imdecode(np.frombuffer(a[ia:], np.uint8), cv2.IMREAD_UNCHANGED)
     db = cv2.imdecode(np.frombuffer(b[ib:], np.uint8), cv2.IMREAD_UNCHANGED)
@@ -106,8 +108,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--old", default="67820fb", help="the commit before the plug-in seam (default 67820fb)")
     ap.add_argument("--duration-s", type=float, default=20.0)
-    ap.add_argument("--pairs", type=int, default=2, help="ABBA blocks of the speed part (each: old, new, new, old)")
+    ap.add_argument(
+        "--pairs", type=int, default=2, help="ABBA blocks of the speed part (each: old, new, new, old)"
+    )
     ap.add_argument("--json", type=Path, help="write the figures here")
+    ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS), help="behaviour part: these scenarios")
     args = ap.parse_args()
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="plugin_seam_") as tmp:
@@ -115,7 +120,8 @@ def main() -> int:
         subprocess.run(["git", "worktree", "add", "--detach", str(old_dir), args.old], cwd=REPO, check=True)
         try:
             behaviour = {}
-            for name, extra in SCENARIOS.items():
+            for name in args.scenarios:
+                extra = SCENARIOS.get(name, [])
                 overrides = [f"scenario={name}", *extra]
                 runs = {}
                 for which, code in (("old", old_dir), ("new", REPO)):
@@ -142,15 +148,19 @@ def main() -> int:
         "behaviour": behaviour,
         "rtf_order": ["old", "new", "new", "old"] * args.pairs,
         "rtf": rtf,
-        "rtf_median": {k: statistics.median(v) for k, v in rtf.items()},
-        "rtf_ratio_new_over_old": statistics.median(rtf["new"]) / statistics.median(rtf["old"]),
+        "rtf_median": {k: statistics.median(v) for k, v in rtf.items() if v},
+        "rtf_ratio_new_over_old": statistics.median(rtf["new"]) / statistics.median(rtf["old"])
+        if rtf["old"]
+        else None,
         "load_average_1min": [load0, os.getloadavg()[0]],
     }
     text = json.dumps(result, indent=2)
     print(text)
     if args.json:
         args.json.write_text(text + "\n")
-    same = all(b.get("same_topics_and_stamps") and not b.get("differing_messages") for b in behaviour.values())
+    same = all(
+        b.get("same_topics_and_stamps") and not b.get("differing_messages") for b in behaviour.values()
+    )
     return 0 if same else 1
 
 
