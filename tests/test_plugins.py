@@ -190,8 +190,7 @@ def test_a_value_the_config_rejects_exits_2_with_its_check(tmp_path: Path) -> No
         "error: invalid config for localizer 'centroid' in config algorithms.localizer: "
         "alpha=7.0 is out of range: alpha must be in (0, 1]; fix the value"
     ), line
-    # nothing but Hydra's own output (.hydra/, run.log): no recording, no metrics, no RUNNING marker
-    assert not run_dir.exists() or {p.name for p in run_dir.iterdir()} <= {"run.log", ".hydra"}
+    assert not run_dir.exists()  # nothing written: the directory Hydra made for it is gone too
 
 
 def test_an_unknown_name_lists_the_registered_ones(tmp_path: Path) -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import shutil
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -240,12 +241,26 @@ def _app(cfg: DictConfig) -> Any:
     cores = job_cpu_share(hydra_cfg)
     limit_threads(cores)
     single_core_job(cfg, cores, list(hydra_cfg.overrides.task))  # (before checking: it sets a field)
-    typed = to_config(cfg)
-    config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
-    if typed.posemap.task != "none":
-        return execute_posemap(typed, run_dir, config_yaml=config_yaml)
-    metrics = execute(typed, run_dir, config_yaml=config_yaml, progress=typed.progress)
+    try:
+        typed = to_config(cfg)
+        config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+        if typed.posemap.task != "none":
+            return execute_posemap(typed, run_dir, config_yaml=config_yaml)
+        metrics = execute(typed, run_dir, config_yaml=config_yaml, progress=typed.progress)
+    except ConfigError:
+        remove_rejected_run_dir(run_dir)
+        raise
     return metrics.get("sim.rtf")
+
+
+HYDRA_OWN = {".hydra", "run.log"}  # what Hydra writes into a run directory before the app runs
+
+
+def remove_rejected_run_dir(run_dir: Path) -> None:
+    """Bad input writes nothing: remove the run directory Hydra made for a refused config, if it
+    holds only Hydra's own files (a directory with anything else, an earlier run's, is kept)."""
+    if run_dir.is_dir() and {p.name for p in run_dir.iterdir()} <= HYDRA_OWN:
+        shutil.rmtree(run_dir, ignore_errors=True)
 
 
 def _registered_app() -> Any:
