@@ -11,6 +11,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(
     submod_attrs={
         "collision": ["CollisionSetup", "collision_setup"],
         "faults": ["CameraFaults"],
+        "legacy": ["with_algorithms"],
         "schema": ["Config", "register_configs"],
         "validation": ["compose_config", "to_config"],
     },

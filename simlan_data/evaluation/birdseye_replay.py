@@ -42,6 +42,7 @@ from simlan_data.algorithms.birdseye_simlan import SimlanBirdseye
 from simlan_data.algorithms.birdseye_stitcher import GpssStitcher
 from simlan_data.algorithms.roles import StitcherContext
 from simlan_data.config.faults import CAMERA_FAULT_OPTIONS
+from simlan_data.config.legacy import with_algorithms
 from simlan_data.config.schema import BirdseyeConfig, WorldConfig
 from simlan_data.errors import ConfigError, RecordingInputError, SimlanError
 from simlan_data.evaluation.birdseye_metrics import (
@@ -62,8 +63,6 @@ LAST_PNG = "birdseye_last.png"
 CANVAS_OPTIONS = ("x_m", "y_m", "px_per_m", "plane_z_m")
 # replay options that are not the stitcher's config: the canvas, what to score, which stitcher, faults
 OPTIONS = (*CANVAS_OPTIONS, "eval_frames", "ground_truth", "stitcher", *CAMERA_FAULT_OPTIONS)
-# recordings made before the stitcher was selectable kept the built-in's keys in the birdseye section
-LEGACY_KEYS = ("feather_m",)
 _TOPIC = re.compile(r"^/camera_([^/]+)/(image_raw|semantic/image_raw)(/compressed)?$")
 
 
@@ -96,11 +95,7 @@ def selected_stitcher(
         ConfigError: an unknown name or option, a value its config rejects.
     """
     options = dict(options or {})
-    algorithms = dict(config.get("algorithms") or {})
-    if not algorithms.get("stitcher"):  # an older recording: its stitcher was the built-in one
-        legacy = {k: v for k, v in (config.get("birdseye") or {}).items() if k in LEGACY_KEYS}
-        algorithms["stitcher"] = {registry.NAME_KEY: registry.DEFAULTS["stitcher"], **legacy}
-        config = {**config, "algorithms": algorithms}
+    config = with_algorithms(config)  # (an older recording: the built-in, its keys from the old place)
     name = options.get("stitcher")
     name = registry.selection(config, "stitcher")[0] if name is None else str(name)
     spec = registry.resolve("stitcher", name, where="replay --set")

@@ -34,6 +34,7 @@ from simlan_data.algorithms import registry
 from simlan_data.algorithms.localization import ImageSearch
 from simlan_data.algorithms.markers import MarkerMount
 from simlan_data.algorithms.roles import CameraFrame, LocalizerContext, searches
+from simlan_data.config.legacy import with_algorithms
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError, RecordingInputError
 from simlan_data.evaluation.camera_health import CameraConsistency
@@ -57,8 +58,6 @@ IMAGE_SUFFIX = "/image_raw/compressed"
 
 # replay options that are not the localizer's config: how to read, which metrics, injected faults
 REPLAY_OPTIONS = ("reader", "navigation", "localizer", "drop_cameras", "yaw_error_deg", "yaw_error_cameras")
-# recordings made before the ``algorithms`` section kept the built-in localizer's keys here
-LEGACY_SECTION = "localization"
 
 
 def selected_localizer(
@@ -71,9 +70,7 @@ def selected_localizer(
         ConfigError: an unknown name or key, a value its config rejects.
     """
     options = dict(options or {})
-    if "algorithms" not in config:  # an older recording: its localizer was the built-in one
-        legacy = {k: v for k, v in (config.get(LEGACY_SECTION) or {}).items() if k != "source"}
-        config = {**config, "algorithms": {"localizer": {"name": registry.DEFAULTS["localizer"], **legacy}}}
+    config = with_algorithms(config)  # (an older recording: the built-in, its keys from the old place)
     overrides = {k: v for k, v in options.items() if k not in REPLAY_OPTIONS}
     name = options.get("localizer")
     return registry.from_config(

@@ -47,6 +47,7 @@ from simlan_data.algorithms import registry
 from simlan_data.algorithms.posemap.metrics import joint_errors, mpjpe, per_joint
 from simlan_data.algorithms.roles import PosemapContext
 from simlan_data.algorithms.trained_posemap import WHERE_KEY, camera_ids
+from simlan_data.config.legacy import with_algorithms
 from simlan_data.errors import ConfigError, RecordingInputError
 from simlan_data.evaluation.replay import ReplayContext, check_options, register
 from simlan_data.geometry.camera import CameraModel
@@ -57,8 +58,6 @@ from simlan_data.world.skeleton import JOINT_NAMES, NUM_JOINTS, landmark_positio
 PREFIX = "replay.posemap"
 # replay options that are not the pose mapper's config: which mapper, whose joints, where it stood
 REPLAY_OPTIONS = ("posemap", "namespace", "position")
-# recordings made before the ``algorithms`` section named the built-in's model here
-LEGACY_SECTION, LEGACY_MODEL_KEY = "posemap", "drive_model"
 WHERE = "posemap replay option "
 JOINTS_FILE = "posemap_joints.parquet"
 FRAMES_FILE = "posemap_frames.parquet"
@@ -77,9 +76,7 @@ def selected_mapper(
         ConfigError: an unknown name or option, a value its config rejects.
     """
     options = dict(options or {})
-    if "algorithms" not in config:  # an older recording: the built-in, driven by posemap.drive_model
-        model = (config.get(LEGACY_SECTION) or {}).get(LEGACY_MODEL_KEY) or ""
-        config = {**config, "algorithms": {"posemap": {"name": registry.DEFAULTS["posemap"], "model": model}}}
+    config = with_algorithms(config)  # (an older recording: the built-in, its model from posemap.drive_model)
     name = options.get("posemap")
     spec = registry.resolve(
         "posemap",

@@ -25,6 +25,7 @@ from simlan_data.algorithms.safety import (
     TreesConfig,
     mover_of,
 )
+from simlan_data.config.legacy import with_algorithms
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import RecordingInputError
 from simlan_data.evaluation.metrics import _yaw, ground_truth
@@ -85,20 +86,6 @@ class SafetyRecording:
         return min(int(np.searchsorted(self.ticks, stamp_ns)), len(self.ticks) - 1)
 
 
-LEGACY_SECTION = "safety"  # where recordings made before safety was an algorithm keep its config
-
-
-def with_safety_algorithm(config: dict[str, Any]) -> dict[str, Any]:
-    """A recorded config with ``algorithms.safety``: a recording made before the safety monitor was
-    an algorithm ran the built-in trees with its top-level ``safety`` section (less ``people``)."""
-    algorithms = dict(config.get("algorithms") or {})
-    if "safety" in algorithms or LEGACY_SECTION not in config:
-        return config
-    legacy = {k: v for k, v in (config.get(LEGACY_SECTION) or {}).items() if k != "people"}
-    algorithms["safety"] = {registry.NAME_KEY: registry.DEFAULTS["safety"], **legacy}
-    return {**config, "algorithms": algorithms}
-
-
 def selected_safety(
     config: dict[str, Any], options: dict[str, Any] | None = None, *, where: str = "replay --set"
 ) -> tuple[registry.AlgorithmSpec, Any]:
@@ -112,7 +99,7 @@ def selected_safety(
     """
     options = dict(options or {})
     name = options.pop("safety", None)
-    recorded_name, values = registry.selection(with_safety_algorithm(config), "safety")
+    recorded_name, values = registry.selection(with_algorithms(config), "safety")
     if name is not None and str(name) != recorded_name:
         values = {}
     spec = registry.resolve("safety", recorded_name if name is None else str(name), where=where)
@@ -166,7 +153,7 @@ def judging_params(config: dict[str, Any], safety_config: Any, context: SafetyCo
     """The trees' params the metrics judge hazards by: the selected config where it is the trees',
     else the recording's trees config (or the trees' defaults) for another monitor."""
     if not isinstance(safety_config, TreesConfig):
-        name, values = registry.selection(with_safety_algorithm(config), "safety")
+        name, values = registry.selection(with_algorithms(config), "safety")
         safety_config = TreesConfig(**values) if name == registry.DEFAULTS["safety"] else TreesConfig()
     return TreeParams.of(safety_config, context)
 

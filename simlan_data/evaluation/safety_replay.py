@@ -41,6 +41,7 @@ from simlan_data.algorithms.safety import (
     TreeParams,
     transition_events,
 )
+from simlan_data.config.legacy import with_algorithms
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import RecordingInputError
 from simlan_data.evaluation.replay import ReplayContext, register
@@ -58,10 +59,7 @@ VERDICTS_MD = "safety_counterfactual.md"
 
 def people_params(config: dict) -> PeopleParams:
     """The recorded person detection (``people``; ``safety.people`` in older recordings)."""
-    section = config.get("people")
-    if section is None:
-        section = (config.get("safety") or {}).get("people")
-    return PeopleParams(**(section or {}))
+    return PeopleParams(**(with_algorithms(config).get("people") or {}))
 
 
 def replay_trees(
