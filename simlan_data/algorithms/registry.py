@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import inspect
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
@@ -272,8 +273,11 @@ class Guarded:
     def __getattr__(self, attr: str) -> Any:
         value = getattr(self._inner, attr)
         if not callable(value) or attr.startswith("_"):
-            return value
-        return self._wrap(attr, value)
+            return value  # data (``timings``, ``zones``...) is read afresh each time
+        wrapped = self._wrap(attr, value)
+        if inspect.ismethod(value):  # a bound method does not change: wrap it once, not per call
+            self.__dict__[attr] = wrapped
+        return wrapped
 
     def _wrap(self, attr: str, fn: Any) -> Any:
         def call(*args: Any, **kwargs: Any) -> Any:
