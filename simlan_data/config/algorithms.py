@@ -68,9 +68,7 @@ def selection_node(spec: registry.AlgorithmSpec) -> type:
             return  # OmegaConf building the node itself
         spec.make_config(values, where=f"config algorithms.{spec.role}")
 
-    return make_dataclass(
-        f"{base.__name__}Selection", fields, namespace={"__post_init__": __post_init__}
-    )
+    return make_dataclass(f"{base.__name__}Selection", fields, namespace={"__post_init__": __post_init__})
 
 
 def selected(overrides: Iterable[str]) -> list[tuple[str, str]]:
@@ -108,7 +106,17 @@ def register_algorithms(overrides: Iterable[str] | None = None) -> None:
 def plain(config: Any) -> dict[str, Any]:
     """A selected algorithm's config as plain values, without its ``name``."""
     return {
-        f.name: getattr(config, f.name)
-        for f in dataclasses.fields(config)
-        if f.name != registry.NAME_KEY
+        f.name: getattr(config, f.name) for f in dataclasses.fields(config) if f.name != registry.NAME_KEY
     }
+
+
+def selected_algorithm(algorithms: AlgorithmsConfig, role: str) -> tuple[registry.AlgorithmSpec, Any]:
+    """The algorithm a typed config selects for ``role`` and its own checked config; the built-in
+    with its defaults where the config has no node for the role (one built without Hydra's
+    defaults list)."""
+    where = f"config algorithms.{role}"
+    node = getattr(algorithms, role)
+    if node is None:
+        return registry.from_config(None, role, where=where)
+    spec = registry.resolve(role, node.name, where="config")
+    return spec, spec.make_config(plain(node), where=where)

@@ -16,12 +16,11 @@ import numpy as np
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
-from simlan_data.algorithms import registry
 from simlan_data.algorithms.birdseye import CanvasSpec
 from simlan_data.algorithms.people import PeopleParams
 from simlan_data.algorithms.posemap.config import PosemapConfig
 from simlan_data.config import collision as collision_scenario
-from simlan_data.config.algorithms import AlgorithmsConfig, plain, register_algorithms
+from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms, selected_algorithm
 from simlan_data.config.collision import CollisionScenarioConfig
 from simlan_data.errors import ConfigError
 from simlan_data.world.physics import PhysicsParams
@@ -554,11 +553,9 @@ class Config:
     def _check_safety_namespaces(self) -> None:
         """The namespaces the safety monitor's config names must be agents of the run (for a
         monitor whose config can say: ``check_namespaces(known, where=)``, as the trees' does)."""
-        selected = self.algorithms.safety
-        if selected is None:
+        if self.algorithms.safety is None:
             return
-        spec = registry.resolve("safety", selected.name, where="config")
-        config = spec.make_config(plain(selected), where="config algorithms.safety")
+        _, config = selected_algorithm(self.algorithms, "safety")
         check = getattr(config, "check_namespaces", None)
         if callable(check):
             check(list(self.agents))

@@ -124,10 +124,8 @@ def selected_safety(
 def processing_delay_s(config: dict[str, Any]) -> float:
     """The localizer's processing delay of a recorded run (``algorithms.localizer``; recordings
     made before the localizer was an algorithm kept it under ``localization``)."""
-    localizer = (config.get("algorithms") or {}).get("localizer") or {}
-    if "processing_delay_s" in localizer:
-        return float(localizer["processing_delay_s"])
-    return float((config.get("localization") or {}).get("processing_delay_s", 0.0))
+    localizer = with_algorithms(config)["algorithms"].get("localizer") or {}
+    return float(localizer.get("processing_delay_s", 0.0))  # (0 for a localizer without one)
 
 
 def safety_context(

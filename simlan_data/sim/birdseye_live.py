@@ -20,7 +20,7 @@ from typing import Any
 
 from simlan_data.algorithms import registry
 from simlan_data.algorithms.roles import StitcherContext
-from simlan_data.config.algorithms import plain
+from simlan_data.config.algorithms import selected_algorithm
 from simlan_data.config.schema import Config
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import messages as M
@@ -45,12 +45,7 @@ def cameras_as_recorded(cameras: Sequence[CameraModel]) -> list[CameraModel]:
 def build_stitcher(cfg: Config, cameras: Sequence[CameraModel]) -> registry.Guarded:
     """The selected stitcher (``algorithms.stitcher``) on the ``birdseye`` canvas, guarded: an
     exception inside it names it and the simulated time (exit 1)."""
-    selected = cfg.algorithms.stitcher
-    if selected is None:  # a config composed without the algorithms/stitcher default: the built-in
-        spec, config = registry.from_config(None, "stitcher", where="config algorithms.stitcher")
-    else:
-        spec = registry.resolve("stitcher", selected.name)
-        config = spec.make_config(plain(selected), where="config algorithms.stitcher")
+    spec, config = selected_algorithm(cfg.algorithms, "stitcher")
     context = StitcherContext(cameras_as_recorded(cameras), cfg.birdseye.canvas())
     return registry.Guarded(spec.build(config, context), spec)
 

@@ -35,7 +35,7 @@ from simlan_data.algorithms.posemap.metrics import mpjpe
 from simlan_data.algorithms.posemap.motion import load_motion
 from simlan_data.algorithms.roles import PosemapContext
 from simlan_data.algorithms.trained_posemap import TrainedPoseMapper, camera_ids
-from simlan_data.config.algorithms import plain
+from simlan_data.config.algorithms import selected_algorithm
 from simlan_data.config.schema import Config
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError
@@ -62,13 +62,7 @@ class DriveInputs:
 def selected_mapper(cfg: Config) -> tuple[registry.AlgorithmSpec, Any]:
     """The pose mapper ``algorithms.posemap`` and its checked config (a Config built without
     Hydra's defaults: the built-in with its defaults)."""
-    where = "config algorithms.posemap"
-    selected = cfg.algorithms.posemap
-    if selected is None:
-        spec = registry.resolve("posemap", registry.DEFAULTS["posemap"], where=where)
-        return spec, spec.make_config({}, where=where)
-    spec = registry.resolve("posemap", selected.name, where=where)
-    return spec, spec.make_config(plain(selected), where=where)
+    return selected_algorithm(cfg.algorithms, "posemap")
 
 
 def trained_mapper_params(cfg: Config) -> TrainedMapperParams:

@@ -34,7 +34,7 @@ from simlan_data.algorithms import registry
 from simlan_data.algorithms.localization import ImageSearch
 from simlan_data.algorithms.roles import CameraFrame
 from simlan_data.algorithms.stack import AgentPlan, ControlOutput, GpssStack, NavigationParams
-from simlan_data.config.algorithms import plain
+from simlan_data.config.algorithms import selected_algorithm
 from simlan_data.config.faults import CameraFaults
 from simlan_data.config.schema import Config
 from simlan_data.constants import FORMAT_VERSION, NS_PER_S
@@ -224,13 +224,7 @@ class Simulation:
     def _factory(self, role: str) -> Callable[[Any], Any]:
         """Build the selected algorithm of ``role`` from its own config, as the replay does
         (guarded: an exception inside it names it and the simulated time)."""
-        selected = getattr(self.cfg.algorithms, role)
-        if selected is None:  # a config composed without this role's group: the built-in, defaults
-            spec = registry.resolve(role, registry.DEFAULTS[role])
-            config = spec.make_config({}, where=f"config algorithms.{role}")
-        else:
-            spec = registry.resolve(role, selected.name)
-            config = spec.make_config(plain(selected), where=f"config algorithms.{role}")
+        spec, config = selected_algorithm(self.cfg.algorithms, role)
         return lambda ctx: registry.Guarded(spec.build(config, ctx), spec)
 
     def _search(
