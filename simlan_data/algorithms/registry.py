@@ -24,7 +24,7 @@ from functools import cache
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-from simlan_data.algorithms.roles import CONTEXTS, ROLES, missing_methods
+from simlan_data.algorithms.roles import CONTEXTS, PROTOCOLS, ROLES, missing_methods
 from simlan_data.errors import ConfigError, PluginError, SimlanError
 
 ENTRY_POINT_GROUP = "simlan_data.algorithms"
@@ -216,14 +216,8 @@ def check(spec: AlgorithmSpec, *, where: str) -> None:
             f"{spec.cls.__module__}.{spec.cls.__qualname__} does not implement the {spec.role} protocol",
             where,
             f"missing method{'s' if len(missing) > 1 else ''}: {', '.join(missing)}",
-            f"implement them (see simlan_data.algorithms.roles.{_protocol_name(spec.role)})",
+            f"implement them (see simlan_data.algorithms.roles.{PROTOCOLS[spec.role].__name__})",
         )
-
-
-def _protocol_name(role: str) -> str:
-    from simlan_data.algorithms.roles import PROTOCOLS
-
-    return PROTOCOLS[role].__name__
 
 
 def selection(config: Mapping[str, Any] | None, role: str) -> tuple[str, dict[str, Any]]:
