@@ -166,6 +166,13 @@ def check_launcher(name: str) -> None:
         )
 
 
+def _check_run_args(args: argparse.Namespace) -> None:
+    """The launcher exists and --jobs is positive (a suite and a comparison run alike)."""
+    check_launcher(args.launcher)
+    if args.jobs < 1:
+        raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
+
+
 def _out_dir(args: argparse.Namespace) -> Path:
     stamp = f"{datetime.now():%Y%m%d_%H%M%S}"  # audit-ok: names the output directory, as Hydra's ${now}
     out: Path = args.out or Path(EVALS_OUTPUT_ROOT) / f"{args.suite}_{stamp}"
@@ -215,9 +222,7 @@ def run_suite(args: argparse.Namespace) -> int:
         raise ConfigError(
             "--reuse with --regenerate", "arguments", "regenerating simulates", "drop one of them"
         )
-    check_launcher(args.launcher)
-    if args.jobs < 1:
-        raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
+    _check_run_args(args)
     cases = _select(suite, args.only)
     if args.reuse is not None:
         reusable(args.reuse)
@@ -356,9 +361,7 @@ def _compared_cases(args: argparse.Namespace, suite: Suite) -> tuple[list[Case],
     ):
         if on:
             raise ConfigError(f"--candidate with {flag}", "arguments", why, "drop one of them")
-    check_launcher(args.launcher)
-    if args.jobs < 1:
-        raise ConfigError(f"invalid --jobs {args.jobs}", "arguments", "must be >= 1", "e.g. --jobs 2")
+    _check_run_args(args)
     selected = [c for c in _select(suite, args.only) if not c.pending]
     cases = [c for c in selected if c.recording is None]
     if not cases:
