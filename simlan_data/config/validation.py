@@ -285,6 +285,81 @@ def check_nulls(node: Any, schema: type = Config, prefix: str = "") -> None:
                 check_nulls(value, member, f"{key}.")
 
 
+# ------------------------------------------------------------------------------ unknown keys
+def check_known_keys(node: Any, schema: Any = Config, prefix: str = "") -> None:
+    """Refuse keys the schema does not have (``+recording.fsynk=true`` forces a new key into the
+    typed config, and building the dataclasses ignores it).
+
+    Open by design: nodes typed ``Any`` or ``dict[str, Any]``, except ``algorithms.ROLE``, checked
+    against the selected algorithm's config class (plus ``name``); ``hydra`` is Hydra's.
+
+    Raises:
+        ConfigError: naming the first unknown key, with a "did you mean".
+    """
+    if isinstance(node, (DictConfig, ListConfig)):
+        node = OmegaConf.to_container(node, resolve=False, throw_on_missing=False)
+    members = get_args(schema) if get_origin(schema) in (Union, UnionType) else (schema,)
+    for member in members:
+        if is_dataclass(member) and isinstance(member, type):
+            _check_dataclass_keys(node, member, prefix)
+            return
+        origin, args = get_origin(member), get_args(member)
+        if origin is dict and len(args) == 2 and isinstance(node, dict):
+            for k, v in node.items():
+                check_known_keys(v, args[1], f"{prefix}{k}.")
+            return
+        if origin is list and args and isinstance(node, list):
+            for i, v in enumerate(node):
+                check_known_keys(v, args[0], f"{prefix[:-1]}[{i}].")
+            return
+
+
+def _check_dataclass_keys(node: Any, schema: type, prefix: str) -> None:
+    if not isinstance(node, dict):
+        return  # a value of the wrong kind (or an interpolation): the type checks say so
+    from simlan_data.config.algorithms import AlgorithmsConfig
+
+    hints = get_type_hints(schema)
+    known = {f.name: hints[f.name] for f in fields(schema)}
+    for key in node:
+        if prefix == "" and schema is Config and key == "hydra":
+            continue
+        if key not in known:
+            full = f"{prefix}{key}"
+            close = did_you_mean(str(key), known).removeprefix("did you mean ")
+            hint = f"did you mean {prefix}{close}" if close else ""
+            raise ConfigError(
+                f"unknown key {full}",
+                "config",
+                f"{schema.__name__} has no such key",
+                hint or "see `python -m simlan_data.run --help` and --cfg job for the keys",
+            )
+    for key, value in node.items():
+        if key not in known:
+            continue
+        if schema is AlgorithmsConfig and isinstance(value, dict):
+            _check_algorithm_keys(value, key, f"{prefix}{key}.")
+        else:
+            check_known_keys(value, known[key], f"{prefix}{key}.")
+
+
+def _check_algorithm_keys(node: dict[str, Any], role: str, prefix: str) -> None:
+    """``algorithms.ROLE``: the selected algorithm's config fields and ``name``."""
+    from simlan_data.algorithms import registry
+    from simlan_data.config.algorithms import selection_node
+
+    name = node.get(registry.NAME_KEY)
+    if not isinstance(name, str) or "${" in name:
+        return
+    try:
+        spec = registry.resolve(role, name, where="config")
+    except SimlanError:
+        return  # an unknown algorithm: the composition's own check names it
+    node_type = selection_node(spec)
+    node_type.__name__ = spec.config_class.__name__  # the name users know
+    _check_dataclass_keys(node, node_type, prefix)
+
+
 # ------------------------------------------------------------------------------- references
 ReferenceCheck = Callable[[Config], None]
 REFERENCE_CHECKS: list[ReferenceCheck] = []
@@ -359,7 +434,8 @@ def compose_config(overrides: Sequence[str]) -> Config:
 
 def to_config(cfg: DictConfig) -> Config:
     """Build the typed config; range and reference checks raise ConfigError."""
-    plain = OmegaConf.to_container(cfg, resolve=False, throw_on_missing=False)  # one walk for both
+    plain = OmegaConf.to_container(cfg, resolve=False, throw_on_missing=False)  # one walk for all
+    check_known_keys(plain)
     check_finite(plain)
     check_nulls(plain)
     resolved = resolve_interpolations(cfg)
