@@ -36,11 +36,13 @@ FORMAT_MAJOR = 1
 #   <run>/.hydra/               Hydra's resolved config, overrides
 #   <run>/RUNNING               present while the run is in progress (absent once finished)
 #   <run>/INCOMPLETE            the run crashed and its recording was recovered (replaces RUNNING)
+#   <run>/INTERRUPTED           a signal (SIGTERM, SIGINT) stopped the run early; what ran is finalized
 RECORDING_DIRNAME = "recording"
 METRICS_FILENAME = "metrics.json"
 REPORT_FILENAME = "report.md"
 RUNNING_MARKER = "RUNNING"
 INCOMPLETE_MARKER = "INCOMPLETE"
+INTERRUPTED_MARKER = "INTERRUPTED"
 DAMAGED_SUFFIX = ".damaged"  # a recovered file's original is kept beside it with this suffix
 DEFAULT_OUTPUT_ROOT = "recordings"
 EVALS_OUTPUT_ROOT = "recordings/evals"  # python -m simlan_data.evals SUITE writes <root>/<suite>_<time>/

@@ -5,6 +5,11 @@ The public name of ``python -m simlan_data.run``; the application is :mod:`simla
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # SIGTERM while the app is imported: one line, exit 143
+    from simlan_data.apps.signals import exit_on_early_signal
+
+    exit_on_early_signal()
+
 from simlan_data.apps.run import cli, main
 
 __all__ = ["cli", "main"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import signal
 import sys
 from collections.abc import Callable
 from typing import NoReturn, TextIO
@@ -99,8 +100,9 @@ def run_cli(
         main()
     except SystemExit:
         raise
-    except KeyboardInterrupt:
-        fail("interrupted", 130)
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM before a run handles it (apps.signals)
+        signum = int(getattr(err, "signum", signal.SIGINT))
+        fail(f"interrupted by {signal.Signals(signum).name}", 128 + signum)
     except BaseException as err:
         if debug:
             raise

@@ -13,7 +13,8 @@ from __future__ import annotations
 import json
 import logging
 import os
-import shutil
+import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,8 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from simlan_data.apps import run_dir as run_dirs
+from simlan_data.apps import signals
 from simlan_data.apps.cli import run_cli
 from simlan_data.config.schema import Config, register_configs
 from simlan_data.config.validation import to_config
@@ -42,8 +45,18 @@ from simlan_data.sim.simulation import RunStats, Simulation
 log = logging.getLogger("simlan_data.run")
 
 
-def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = True) -> dict[str, float]:
+def execute(
+    cfg: Config,
+    run_dir: Path,
+    *,
+    config_yaml: str,
+    progress: bool = True,
+    stop: Callable[[], bool] | None = None,
+) -> dict[str, float]:
     """Check inputs, simulate and record into ``run_dir``; returns the metrics.
+
+    ``stop()`` ends the simulation early at a step boundary (a signal): the recording, the
+    metrics and the report of what ran are still written (``run.stopped_early`` in the metrics).
 
     Raises:
         ConfigError: bad inputs (before anything is written).
@@ -80,7 +93,7 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
         return f"`python -m simlan_data.recover {run_dir}` reads what was recorded" if bag.exists() else ""
 
     try:
-        stats = sim.run(bag, progress=on_progress)
+        stats = sim.run(bag, progress=on_progress, stop=stop)
     except PluginError as err:  # the recording was finished: no recovery needed
         marker.unlink(missing_ok=True)
         kept = f"the recording up to then is kept in {bag}" if bag.exists() else ""
@@ -107,6 +120,7 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
     metrics["job.opencv_threads"] = float(cv2.getNumThreads())
     metrics["job.encode_threads"] = float(cfg.recording.encode_threads)
     metrics["job.gl_threads"] = float(os.environ.get("LP_NUM_THREADS", "-1") or -1)  # -1: Mesa's default
+    metrics["run.stopped_early"] = float(stats.stopped_early)
     if cfg.recording.enabled:
         with RecordingReader(bag) as reader:
             ctx = ReplayContext(reader, run_dir)
@@ -117,7 +131,8 @@ def execute(cfg: Config, run_dir: Path, *, config_yaml: str, progress: bool = Tr
     else:
         (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
     marker.unlink()
-    print_summary(cfg, stats, metrics, run_dir)
+    if not stats.stopped_early:  # (an interrupted run says so in its one error line)
+        print_summary(cfg, stats, metrics, run_dir)
     return metrics
 
 
@@ -241,26 +256,47 @@ def _app(cfg: DictConfig) -> Any:
     cores = job_cpu_share(hydra_cfg)
     limit_threads(cores)
     single_core_job(cfg, cores, list(hydra_cfg.overrides.task))  # (before checking: it sets a field)
+    lock: run_dirs.RunDirLock | None = None
     try:
         typed = to_config(cfg)
+        lock = run_dirs.claim(run_dir)  # held until the process ends
+        if typed.posemap.task == "none":  # names this process to a second run into the directory
+            write_running(run_dir, RunMarker.for_this_process(typed.duration_s))
+        run_dirs.write_provenance(run_dir, cfg, hydra_cfg, list(hydra_cfg.overrides.task))
         config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
         if typed.posemap.task != "none":
             return execute_posemap(typed, run_dir, config_yaml=config_yaml)
-        metrics = execute(typed, run_dir, config_yaml=config_yaml, progress=typed.progress)
+        return run_until_signal(typed, run_dir, config_yaml)
+    except run_dirs.RunDirTakenError:
+        raise  # another run's directory: not ours to clean
     except ConfigError:
-        remove_rejected_run_dir(run_dir)
+        if not (run_dir / RECORDING_DIRNAME).exists():
+            run_dirs.clear_refused(run_dir, lock)  # bad input writes nothing
         raise
+
+
+def run_until_signal(cfg: Config, run_dir: Path, config_yaml: str) -> float | None:
+    """``execute``, stopped early by SIGTERM or SIGINT (``apps.signals``): what ran is
+    finalized and reported, the run directory is marked ``INTERRUPTED``, exit 128 + signal."""
+    second = signals.say_stopped_at_once(
+        f"{{signal}} again during the shutdown: stopped at once; `python -m simlan_data.recover {run_dir}` "
+        "reads what was recorded"
+    )
+    with signals.graceful_stop(on_second=second) as stop:
+        wall0 = time.monotonic()
+        metrics = execute(cfg, run_dir, config_yaml=config_yaml, progress=cfg.progress, stop=stop)
+        if metrics.get("run.stopped_early") and stop.signum is not None:
+            reached = metrics.get("sim.duration_s", 0.0)
+            run_dirs.mark_interrupted(run_dir, stop.name, reached, cfg.duration_s, time.monotonic() - wall0)
+            raise signals.RunInterruptedError(
+                stop.signum,
+                f"interrupted by {stop.name}",
+                str(run_dir),
+                f"stopped at {reached:.2f} s of {cfg.duration_s:g} s simulated; the recording, "
+                "metrics.json and report.md of what ran are written",
+                f"replay it with `python -m simlan_data.replay {run_dir / RECORDING_DIRNAME}`",
+            )
     return metrics.get("sim.rtf")
-
-
-HYDRA_OWN = {".hydra", "run.log"}  # what Hydra writes into a run directory before the app runs
-
-
-def remove_rejected_run_dir(run_dir: Path) -> None:
-    """Bad input writes nothing: remove the run directory Hydra made for a refused config, if it
-    holds only Hydra's own files (a directory with anything else, an earlier run's, is kept)."""
-    if run_dir.is_dir() and {p.name for p in run_dir.iterdir()} <= HYDRA_OWN:
-        shutil.rmtree(run_dir, ignore_errors=True)
 
 
 def _registered_app() -> Any:
@@ -270,6 +306,7 @@ def _registered_app() -> Any:
 
 def main() -> None:
     """The command line: the Hydra app, errors turned into one line and an exit code."""
+    signals.install_early_handlers()  # SIGTERM while the config is composed: one line, exit 143
     run_cli(_registered_app, started=lambda: bool(_STARTED))
 
 

@@ -77,6 +77,7 @@ class RunStats:
     navigation: dict[str, object] = field(default_factory=dict)  # namespace -> NavigationStatus
     recording_bytes: int = 0
     extra_metrics: dict[str, float] = field(default_factory=dict)  # e.g. posemap.drive.*
+    stopped_early: bool = False  # ``stop()`` ended the loop before ``duration_s`` (a signal)
 
     def metrics(self) -> dict[str, float]:
         sim_s = self.sim_duration_ns / NS_PER_S
@@ -121,8 +122,18 @@ class Simulation:
     def stamp_ns(self, step: int) -> int:
         return step * NS_PER_S // self.physics_hz
 
-    def run(self, bag_path: Path, *, progress: Callable[[float], None] | None = None) -> RunStats:
-        """Simulate ``duration_s`` and write the bag at ``bag_path`` (which must not exist)."""
+    def run(
+        self,
+        bag_path: Path,
+        *,
+        progress: Callable[[float], None] | None = None,
+        stop: Callable[[], bool] | None = None,
+    ) -> RunStats:
+        """Simulate ``duration_s`` and write the bag at ``bag_path`` (which must not exist).
+
+        ``stop()`` is asked at every step boundary; once it says yes the loop ends there and the
+        recording is finished as after a complete run (``stats.stopped_early``).
+        """
         cfg = self.cfg
         stats = RunStats(
             calibration_issues=list(self.inputs.calibration_issues), cameras=len(self.inputs.cameras)
@@ -157,7 +168,7 @@ class Simulation:
                 self.birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
                 wall0, cpu0, main0 = time.perf_counter(), time.process_time(), time.thread_time()
                 try:
-                    self._loop(scene, writer, stats, progress)
+                    self._loop(scene, writer, stats, progress, stop)
                 except PluginError as err:  # the recording up to the failure is finished and kept
                     failed = err
                 stats.wall_s = time.perf_counter() - wall0
@@ -269,12 +280,21 @@ class Simulation:
 
     # --------------------------------------------------------------------------- the loop
     def _loop(
-        self, scene: Scene, writer: RecordingWriter, stats: RunStats, progress: Callable[[float], None] | None
+        self,
+        scene: Scene,
+        writer: RecordingWriter,
+        stats: RunStats,
+        progress: Callable[[float], None] | None,
+        stop: Callable[[], bool] | None,
     ) -> None:
         """Step the scene ``steps`` times, running each tick whose rate divides the step."""
         run = self._start(scene, writer, stats)
         dt_control = self.control_every / self.physics_hz
+        last = self.steps
         for step in range(self.steps + 1):
+            if stop is not None and stop():
+                last, stats.stopped_early = max(step - 1, 0), True
+                break
             t = self.stamp_ns(step)
             if step % self.truth_every == 0:
                 run.pub.ground_truth(t)
@@ -288,7 +308,7 @@ class Simulation:
                 self._control_tick(run, t, dt_control)
             if step < self.steps:
                 self._physics_step(run)
-        stats.sim_duration_ns = self.stamp_ns(self.steps)
+        stats.sim_duration_ns = self.stamp_ns(last)
         if run.driver is not None:
             stats.extra_metrics.update(run.driver.finish())
         stats.navigation = {ns: nav.status for ns, nav in run.stack.navigators.items()}
