@@ -2,21 +2,24 @@
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
 import signal
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import NoReturn, TextIO
 
 import yaml
 from hydra.errors import HydraException
 from omegaconf.errors import OmegaConfBaseException
 
+from simlan_data.config.safe_yaml import check_config_dirs
 from simlan_data.config.validation import config_error_from
-from simlan_data.constants import CONF_DIR
-from simlan_data.errors import EXIT_BAD_INPUT, EXIT_FAILED_RUN, SimlanError
+from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, REPORT_FILENAME
+from simlan_data.errors import EXIT_BAD_INPUT, EXIT_FAILED_RUN, RunError, SimlanError
 
 log = logging.getLogger("simlan_data")
 
@@ -72,6 +75,64 @@ def _in_chain(err: BaseException | None, kind: type[BaseException]) -> BaseExcep
     return None
 
 
+DISK_ERRORS = {  # errno: what the disk said (a failed run, never a bad config)
+    errno.ENOSPC: "no space left on",
+    errno.EDQUOT: "disk quota exceeded on",
+    errno.EIO: "input/output error on",
+    errno.EROFS: "read-only file system at",
+}
+
+
+def disk_error(err: BaseException) -> RunError | None:
+    """A full (or failing, or read-only) disk anywhere among ``err`` and its causes, as one
+    line naming the file and what of the run survived; None if the disk is not the cause."""
+    found = _in_chain(err, OSError)
+    seen = 0
+    cur: BaseException | None = err
+    while cur is not None and seen < 20:  # the first OSError whose errno says the disk
+        if isinstance(cur, OSError) and cur.errno in DISK_ERRORS:
+            found = cur
+            break
+        cur, seen = cur.__cause__ or cur.__context__, seen + 1
+    if not isinstance(found, OSError) or found.errno not in DISK_ERRORS:
+        return None
+    path = Path(os.fsdecode(found.filename)) if found.filename else _output_dir()
+    kept = survivors(path)
+    return RunError(
+        f"{DISK_ERRORS[found.errno]} {path}",
+        "",
+        f"{os.strerror(found.errno)} (errno {errno.errorcode[found.errno]}); "
+        + (f"kept: {', '.join(kept)}" if kept else "nothing of the run was kept"),
+        "free space there (or choose another hydra.run.dir) and rerun",
+    )
+
+
+def _output_dir() -> Path:
+    """Hydra's run directory once it has one (the file a write failed on is not always known)."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        if HydraConfig.initialized() and HydraConfig.get().runtime.output_dir:
+            return Path(HydraConfig.get().runtime.output_dir)
+    except Exception:  # not in a Hydra job (yet): the command line says
+        pass
+    for arg in reversed(sys.argv[1:]):
+        key, _, value = arg.lstrip("+").partition("=")
+        if key in ("hydra.run.dir", "hydra.sweep.dir") and value:
+            return Path(value)
+    return Path.cwd()
+
+
+def survivors(path: Path) -> list[str]:
+    """What a run directory at or above ``path`` holds of a run's outputs (recording, metrics,
+    report), for the line that says a run failed."""
+    for run_dir in [path, *list(path.parents)[:3]]:
+        if (run_dir / ".hydra").is_dir() or (run_dir / RECORDING_DIRNAME).is_dir():
+            names = (RECORDING_DIRNAME, METRICS_FILENAME, REPORT_FILENAME)
+            return [str(run_dir / n) for n in names if (run_dir / n).exists()]
+    return []
+
+
 def fail(message: str, code: int) -> NoReturn:
     sys.stderr.write(f"error: {message}\n")
     sys.stderr.flush()
@@ -97,6 +158,7 @@ def run_cli(
     real_stderr = sys.stderr
     sys.stderr = _StderrWithoutHydraJobError(real_stderr)
     try:
+        check_config_dirs(sys.argv[1:], app_dir=Path(__file__).parent)  # before Hydra reads them
         main()
     except SystemExit:
         raise
@@ -106,7 +168,7 @@ def run_cli(
     except BaseException as err:
         if debug:
             raise
-        ours = _root_simlan_error(err) or config_error_from(err)
+        ours = disk_error(err) or _root_simlan_error(err) or config_error_from(err)
         if ours is not None:
             fail(ours.line(), ours.exit_code)
         bad_yaml = _in_chain(err, yaml.MarkedYAMLError)

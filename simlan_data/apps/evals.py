@@ -111,9 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def list_suite_file(path: Path) -> str:
-    import yaml
+    from simlan_data.config.safe_yaml import load_yaml
 
-    doc = yaml.safe_load(path.read_text()) or {}
+    doc = load_yaml(path, what="suite file") or {}
     lines = [f"suite file {path}"]
     for name in doc.get("suites") or {}:
         suite = load_suite(path, name)

@@ -413,8 +413,10 @@ def compose_config(overrides: Sequence[str]) -> Config:
     """
     from hydra import compose, initialize_config_dir
 
+    from simlan_data.config.safe_yaml import check_config_dirs
     from simlan_data.config.schema import register_configs
 
+    check_config_dirs(overrides)  # before OmegaConf copies out an alias bomb
     register_configs(list(overrides))
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):

@@ -49,6 +49,7 @@ from typing import Any, get_type_hints
 
 import yaml
 
+from simlan_data.config.safe_yaml import load_yaml
 from simlan_data.config.schema import Config
 from simlan_data.constants import CONF_DIR
 from simlan_data.errors import ConfigError
@@ -360,7 +361,7 @@ def load_suite(path: Path, name: str, *, seeds: int | None = None) -> Suite:
     if path.stat().st_size > MAX_SUITE_BYTES:
         raise _err(where, "suite file too large", f"over {MAX_SUITE_BYTES} bytes", "split it")
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = load_yaml(path, what="suite file")  # bounded: an alias bomb is refused
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         raise _err(where, "suite file unreadable", first, "fix the YAML") from err
