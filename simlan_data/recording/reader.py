@@ -17,7 +17,7 @@ from rosbags.typesys.store import Typestore
 
 from simlan_data.constants import FORMAT_MAJOR, NS_PER_S, RECORDING_DIRNAME
 from simlan_data.errors import RecordingInputError
-from simlan_data.recording import schema
+from simlan_data.recording import losses, schema
 from simlan_data.recording.run_marker import read_running, writer_alive
 
 METADATA_KEY_FORMAT = "simlan.format_version"
@@ -376,6 +376,11 @@ class RecordingReader:
                 f"Recovered:         yes: the run crashed; data until {until:.3f} s, "
                 f"{self.custom_data.get('simlan.recovered_damaged_chunks', '0')} damaged chunks skipped"
             )
+            text = self.custom_data.get(losses.LOSSES_KEY)
+            lost = losses.decode(text) if text is not None else losses.from_incomplete(self.path.parent)
+            shown = lost[:20] + ([f"... and {len(lost) - 20} more"] if len(lost) > 20 else [])
+            shown = shown or (["no message (nothing the file held or the run reached)"] if text else [])
+            lines.extend(f"{'Lost:' if i == 0 else '':<19}{x}" for i, x in enumerate(shown))
         lines.append("Topic information:")
         topics = sorted(self.topics.values(), key=lambda t: t.name)
         width = max((len(t.name) for t in topics), default=10)

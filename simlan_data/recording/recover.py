@@ -13,6 +13,10 @@ A killed run leaves ``recording.mcap`` without its summary section and the bag w
 A recording that is complete and intact is left alone. The run directory's ``RUNNING`` marker
 (which says how far the simulated clock got) becomes ``INCOMPLETE``, and the recovered
 metadata's custom_data says ``simlan.recovered: 'true'``.
+
+Every message the file held (or the run's clock reached) that is not kept is named as a time
+range per topic (``recording.losses``): in the printed report, in ``INCOMPLETE`` (``losses``,
+``messages_lost``, ``lost_s``) and in the recovered bag's custom_data (``replay --info``).
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from mcap.records import Channel, Message, Schema
 
 from simlan_data.constants import DAMAGED_SUFFIX, NS_PER_S, RECORDING_DIRNAME
 from simlan_data.errors import RecordingError, RecordingInputError
+from simlan_data.recording import losses as L
 from simlan_data.recording import schema
 from simlan_data.recording.reader import METADATA_KEY_FORMAT, RecordingReader
 from simlan_data.recording.run_marker import RunMarker, mark_incomplete, read_running, writer_alive
@@ -67,6 +72,11 @@ class RecoveryReport:
         """How far the run's simulated clock got (its RUNNING marker), if known."""
         return self.marker.simulated_s if self.marker is not None and self.marker.pid > 0 else None
 
+    @property
+    def losses(self) -> list[L.Loss]:
+        """Every range of messages not kept, per topic where known (see ``all_losses``)."""
+        return all_losses(self.salvage, self.reached_s)
+
     def summary(self) -> dict[str, Any]:
         """Machine-readable summary (the INCOMPLETE marker and --json)."""
         s = self.salvage
@@ -85,8 +95,29 @@ class RecoveryReport:
             "unreadable_bytes": s.size - s.readable_bytes,
             "chunks_resumed_from_index": s.resumed_from_index,
             "topics": dict(sorted(s.counts.items())),
+            **({} if s.intact and self.had_metadata else L.totals(self.losses)),
             "damaged_copy": str(self.damaged_copy) if self.damaged_copy else None,
         }
+
+    def _loss_lines(self) -> list[str]:
+        losses = self.losses
+        if not losses:
+            return ["  lost messages  none"]
+        known = sum(x.messages or 0 for x in losses)
+        unknown = " and an unknown number" if any(x.messages is None for x in losses) else ""
+        topics = {x.topic for x in losses}
+        on = "" if L.ALL_TOPICS in topics else f" on {len(topics)} topic{'s' * (len(topics) != 1)}"
+        out = [f"  lost messages  {known}{unknown}{on}, {L.lost_s(losses):.3f} s of simulated time:"]
+        cause = None
+        for x in losses[: L.MAX_LISTED]:  # grouped by where and why (one damaged chunk: one group)
+            if x.cause != cause:
+                cause = x.cause
+                out.append(f"    {cause}:")
+            d = x.as_dict()
+            out.append(f"      {L.describe(x.topic, d['from_s'], d['to_s'], x.messages)}")
+        if len(losses) > L.MAX_LISTED:
+            out.append(f"    ... and {len(losses) - L.MAX_LISTED} more ranges")
+        return out
 
     def lines(self) -> list[str]:
         """The human report the CLI prints."""
@@ -146,6 +177,7 @@ class RecoveryReport:
                 f"{max(0.0, self.intended_s - end):.3f} s never simulated (of {self.intended_s:g} s intended)"
             )
         out.append(f"  lost           {'; '.join(lost) if lost else 'nothing the file says it held'}")
+        out.extend(self._loss_lines())
         width = max((len(t) for t in s.counts), default=10)
         out.append("  messages per topic:")
         out.extend(f"    {t:<{width}} {n}" for t, n in sorted(s.counts.items()))
@@ -156,6 +188,31 @@ class RecoveryReport:
         if self.written:
             out.append(f"  next           python -m simlan_data.replay {self.bag} --info")
         return out
+
+
+def all_losses(salvage: Salvage, reached_s: float | None) -> list[L.Loss]:
+    """What the file lost (``salvage.losses``), then what lies beyond its readable part.
+
+    Bytes at the end that are no whole record (garbage, or a record cut short) are named with
+    the time range they may have held: from the last time the file speaks of to how far the run's
+    clock got (its RUNNING marker), or open-ended if that is unknown. Without such bytes, the same
+    range is what the run never wrote (it stopped before its next flush).
+    """
+    s = salvage
+    out = list(s.losses)
+    covered = s.covered_ns or 0
+    reached = None if reached_s is None else round(reached_s * NS_PER_S)
+    further = reached is not None and reached > covered
+    tail = s.size - s.readable_bytes
+    if tail and s.tail_chunk is None and not s.complete and not s.resumed_from_index:
+        why = f"{tail} bytes from byte {s.readable_bytes} are unreadable ({s.stop_reason or 'not whole records'})"
+        if further or reached is None:
+            out.append(L.Loss(L.ALL_TOPICS, covered, reached, None, why))
+    elif further:
+        out.append(
+            L.Loss(L.ALL_TOPICS, covered, reached, None, "not in the file: the run stopped before writing it")
+        )
+    return out
 
 
 # --------------------------------------------------------------------------------- writing
@@ -253,7 +310,7 @@ def recover(path: Path | str, *, dry_run: bool = False, force: bool = False) -> 
             "recovering again would replace the only copy of the damaged file",
             "move it away, then rerun",
         )
-    report.salvage = _rewrite(bag, mcap)
+    report.salvage = _rewrite(bag, mcap, report.reached_s)
     # commit: keep the original under another name (a hard link: no copy, no window without a
     # file), put the new MCAP in place, then metadata.yaml (readers need it: the commit point)
     work = bag / WORK_DIRNAME / bag.name
@@ -288,7 +345,7 @@ def _metadata_agrees(bag: Path, probe: Salvage) -> bool:
         return False
 
 
-def _rewrite(bag: Path, mcap: Path) -> Salvage:
+def _rewrite(bag: Path, mcap: Path, reached_s: float | None) -> Salvage:
     """Write the readable part of ``mcap`` as a new bag under ``bag/.recover/``; verify it."""
     shutil.rmtree(bag / WORK_DIRNAME, ignore_errors=True)
     (bag / WORK_DIRNAME).mkdir()
@@ -317,6 +374,7 @@ def _rewrite(bag: Path, mcap: Path) -> Salvage:
         writer.set_metadata(RECOVERED_KEY, "true")
         writer.set_metadata("simlan.recovered_until_ns", str(salvage.last_ns or 0))
         writer.set_metadata("simlan.recovered_damaged_chunks", str(len(salvage.damaged)))
+        writer.set_metadata(L.LOSSES_KEY, L.encode(all_losses(salvage, reached_s)))
         writer.close()
         for written in (work / f"{bag.name}.mcap", work / "metadata.yaml"):
             _fsync(written)

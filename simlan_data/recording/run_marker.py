@@ -101,6 +101,7 @@ def mark_incomplete(run_dir: Path, summary: dict[str, Any]) -> Path:
     header = (
         "# This run did not finish: its recording was recovered up to its last complete chunk.\n"
         "# It has no metrics.json or report.md; replay the recording to compute metrics.\n"
+        "# `losses` names every range of messages (per topic) that recovery could not keep.\n"
     )
     _write_atomic(path, header + yaml.safe_dump(summary, sort_keys=False))
     (run_dir / RUNNING_MARKER).unlink(missing_ok=True)

@@ -3,13 +3,16 @@
     recording.mcap --StreamReader (mcap library, front to back, no seeking)-->
         Header, Chunk, MessageIndex, ..., Chunk, <cut>
         every record: its length must fit in the file (no allocation beyond the file size)
-        every Chunk: declared size <= 1 GiB -> zstd into at most that size -> CRC32 -> records
-            -> each message names a known channel and lies in the chunk's time range
-        a chunk failing a check is skipped and reported; reading stops at the first record that
-        is cut short or unreadable
+        every Chunk: declared size <= 1 GiB -> zstd into at most that size -> CRC32 -> records,
+            each of whose lengths must fit -> each message names a known channel and lies in the
+            chunk's time range
+        a chunk failing a check is skipped (records before a bad record length inside it are
+        kept) and what it lost is named per topic from its MessageIndex records (which follow
+        it), or as "all topics" in its header's time range; reading stops at the first record
+        that is cut short or unreadable, or at bytes that are no record (garbage)
     --(only if reading stopped early and the file still has its summary section, e.g. a damaged
        record in a finished file)--> the summary's chunk index and channel table resume reading
-       at every later chunk
+       at every later chunk, and its chunk index finds the message indexes of damaged chunks
 
 Used by ``recording.recover`` (which writes what is found into a new bag) and its ``--dry-run``.
 """
@@ -29,9 +32,10 @@ from typing import Any, BinaryIO
 import yaml
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Message, MessageIndex, Schema
+from mcap.stream_reader import read_magic
 
 if sys.version_info >= (3, 14):
     from compression import zstd
@@ -40,6 +44,7 @@ else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
 
 from simlan_data.errors import RecordingInputError
 from simlan_data.recording import schema
+from simlan_data.recording.losses import ALL_TOPICS, Loss
 
 MAX_CHUNK_BYTES = (
     1 << 30
@@ -52,9 +57,13 @@ class BadChunkError(Exception):
     """A chunk whose records cannot be trusted (the reason is the message)."""
 
 
+class NotRecordsError(Exception):
+    """Bytes where a record should start that are no MCAP record (garbage, or zeros after a crash)."""
+
+
 @dataclass(frozen=True)
 class ChunkDamage:
-    """A chunk that was skipped: where, why, and the time range its header claims."""
+    """A chunk that was skipped (or kept only up to a damaged record): where, why, its header's times."""
 
     offset: int
     why: str
@@ -76,6 +85,7 @@ class Salvage:
     chunks: int = 0
     chunks_with_crc: int = 0
     damaged: list[ChunkDamage] = field(default_factory=list)
+    losses: list[Loss] = field(default_factory=list)  # messages the file held that are not kept
     counts: dict[str, int] = field(default_factory=dict)  # topic -> messages recovered
     first_ns: int | None = None
     last_ns: int | None = None
@@ -90,9 +100,17 @@ class Salvage:
     def intact(self) -> bool:
         return self.complete and not self.damaged and not self.stop_reason
 
+    @property
+    def covered_ns(self) -> int | None:
+        """The latest time the file's readable part speaks of (recovered, or named as lost)."""
+        ends = [t for t in (self.last_ns, *(d.end_ns for d in self.damaged)) if t is not None]
+        if self.tail_chunk is not None:
+            ends.append(self.tail_chunk[1])
+        return max(ends, default=None)
 
-def open_chunk(chunk: Chunk) -> list[Any]:
-    """The Schema/Channel/Message records of a chunk, after size, decompression and CRC checks.
+
+def chunk_data(chunk: Chunk) -> bytes:
+    """A chunk's records as bytes, after size, decompression and CRC checks.
 
     Raises:
         BadChunkError: the chunk cannot be trusted.
@@ -116,18 +134,72 @@ def open_chunk(chunk: Chunk) -> list[Any]:
         raise BadChunkError(f"{len(raw)} bytes uncompressed, header says {size}")
     if chunk.uncompressed_crc and zlib.crc32(raw) != chunk.uncompressed_crc:
         raise BadChunkError("CRC mismatch")
-    plain = Chunk(
-        compression="",
-        data=raw,
-        message_end_time=chunk.message_end_time,
-        message_start_time=chunk.message_start_time,
-        uncompressed_crc=0,
-        uncompressed_size=size,
-    )
-    try:
-        return breakup_chunk(plain)
-    except PARSE_ERRORS as err:
-        raise BadChunkError(f"records unreadable ({type(err).__name__})") from None
+    return raw
+
+
+@dataclass
+class ChunkRecords:
+    """The records of a chunk's data up to the first that cannot be read."""
+
+    records: list[tuple[int, Any]]  # (offset in the chunk's data, Schema | Channel | Message)
+    damage_at: int | None = None  # where the first unreadable record starts (None: all read)
+    why: str = ""
+    suspect_last: bool = False  # no record starts at damage_at: the previous one's length may be wrong
+
+
+def chunk_records(raw: bytes) -> ChunkRecords:
+    """Parse a chunk's records strictly: every length must fit, every body must parse.
+
+    (The mcap library's ``breakup_chunk`` stops silently where a length runs past the data, and
+    skips what it does not know: a damaged length there lost the rest of the chunk unreported.)
+    """
+    out = ChunkRecords([])
+    pos, n, view = 0, len(raw), memoryview(raw)
+    while pos < n:
+        if n - pos < 9:
+            out.damage_at, out.why, out.suspect_last = pos, f"a record cut short at byte {pos}", True
+            return out
+        opcode, length = struct.unpack_from("<BQ", raw, pos)
+        if opcode not in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+            out.damage_at, out.why, out.suspect_last = (
+                pos,
+                f"no record at byte {pos} (opcode {opcode:#04x})",
+                True,
+            )
+            return out
+        if length > n - pos - 9:
+            out.damage_at, out.why = (
+                pos,
+                f"bad record length at byte {pos} ({length} bytes, {n - pos - 9} left)",
+            )
+            return out
+        body = view[pos + 9 : pos + 9 + length]
+        try:
+            if opcode == Opcode.MESSAGE:
+                if length < 22:
+                    raise ValueError("message record too short")
+                cid, seq, log_time, pub_time = struct.unpack_from("<HIQQ", body)
+                rec: Any = Message(cid, log_time, bytes(body[22:]), pub_time, seq)
+            else:
+                rec = (Schema if opcode == Opcode.SCHEMA else Channel).read(ReadDataStream(BytesIO(body)))
+        except PARSE_ERRORS:
+            out.damage_at, out.why, out.suspect_last = pos, f"an unreadable record at byte {pos}", True
+            return out
+        out.records.append((pos, rec))
+        pos += 9 + length
+    return out
+
+
+def open_chunk(chunk: Chunk) -> list[Any]:
+    """The Schema/Channel/Message records of a chunk, after size, decompression and CRC checks.
+
+    Raises:
+        BadChunkError: the chunk cannot be trusted (in whole or in part).
+    """
+    parsed = chunk_records(chunk_data(chunk))
+    if parsed.damage_at is not None:
+        raise BadChunkError(parsed.why)
+    return [r for _, r in parsed.records]
 
 
 def _check_chunk(
@@ -176,6 +248,36 @@ def _chunk_at(f: BinaryIO, offset: int, length: int, size: int) -> Chunk:
         ) from None
 
 
+def _indexes_at(f: BinaryIO, ci: ChunkIndex, size: int) -> list[MessageIndex] | None:
+    """The MessageIndex records a chunk index entry points to, or None if any is unreadable."""
+    out = []
+    for offset in ci.message_index_offsets.values():
+        if not 8 <= offset <= size - 9:
+            return None
+        f.seek(offset)
+        opcode, length = struct.unpack("<BQ", f.read(9))
+        if opcode != Opcode.MESSAGE_INDEX or length > min(size - offset - 9, ci.message_index_length):
+            return None
+        try:
+            out.append(MessageIndex.read(ReadDataStream(BytesIO(f.read(length)))))
+        except PARSE_ERRORS:
+            return None
+    return out
+
+
+@dataclass
+class _Damaged:
+    """A damaged chunk waiting for its MessageIndex records (which follow it in the file)."""
+
+    offset: int
+    start_ns: int
+    end_ns: int
+    size: int  # of its uncompressed data
+    why: str
+    parsed: ChunkRecords  # what was readable before the damage (nothing for a bad CRC)
+    index: list[MessageIndex] = field(default_factory=list)
+
+
 class _Collector:
     """Schemas, channels and messages in file order, with the callbacks of ``scan``."""
 
@@ -189,6 +291,7 @@ class _Collector:
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.store = schema.typestore()
+        self.orphans: dict[int, list[int]] = {}  # channel id -> [count, first, last] without a channel
 
     def take(self, rec: Any) -> None:
         out = self.out
@@ -201,7 +304,9 @@ class _Collector:
                     self.on_channel(rec, self.schemas[rec.schema_id])
         elif isinstance(rec, Message):
             ch = self.channels.get(rec.channel_id)
-            if ch is None:
+            if ch is None:  # its Channel record was lost (with a damaged chunk): reported
+                o = self.orphans.setdefault(rec.channel_id, [0, rec.log_time, rec.log_time])
+                o[0], o[1], o[2] = o[0] + 1, min(o[1], rec.log_time), max(o[2], rec.log_time)
                 return
             out.counts[ch.topic] = out.counts.get(ch.topic, 0) + 1
             out.first_ns = rec.log_time if out.first_ns is None else min(out.first_ns, rec.log_time)
@@ -211,24 +316,130 @@ class _Collector:
             if self.on_message is not None:
                 self.on_message(ch, rec)
 
-    def chunk(self, rec: Chunk, offset: int) -> None:
+    def chunk(self, rec: Chunk, offset: int) -> _Damaged | None:
+        """Take an intact chunk's records; a damaged one is returned to wait for its index."""
+        damaged = _Damaged(
+            offset,
+            rec.message_start_time,
+            rec.message_end_time,
+            rec.uncompressed_size,
+            "",
+            ChunkRecords([], 0),
+        )
         try:
-            inner = open_chunk(rec)
-            _check_chunk(inner, rec, self.schemas, self.channels)
+            parsed = chunk_records(chunk_data(rec))
+            _check_chunk([r for _, r in parsed.records], rec, self.schemas, self.channels)
         except BadChunkError as err:
-            self.out.damaged.append(
-                ChunkDamage(offset, str(err), rec.message_start_time, rec.message_end_time)
-            )
-            return
-        for r in inner:
+            damaged.why = str(err)
+            return damaged
+        if parsed.damage_at is not None:
+            damaged.why, damaged.parsed = parsed.why, parsed
+            return damaged
+        for _, r in parsed.records:
             self.take(r)
         self.out.chunks += 1
         self.out.chunks_with_crc += int(rec.uncompressed_crc != 0)
+        return None
+
+    def finish(self, d: _Damaged, index: list[MessageIndex] | None, index_whole: bool) -> None:
+        """Keep what a damaged chunk still holds; name what it lost (exactly, where its index tells)."""
+        entries = self._entries(d, index)
+        parsed = d.parsed
+        at = parsed.damage_at or 0
+        kept = list(parsed.records)
+        starts = {off for es in (entries or {}).values() for _, off in es}
+        if at and parsed.suspect_last and at not in starts:
+            # no record starts where the damage does: the last record's own length may be wrong
+            last = max((i for i, (_, r) in enumerate(kept) if isinstance(r, Message)), default=None)
+            if last is not None:
+                at = kept[last][0]
+                kept = [x for i, x in enumerate(kept) if i < last or not isinstance(x[1], Message)]
+        for _, r in kept:
+            self.take(r)
+        cause = f"{d.why} in the chunk at byte {d.offset}"
+        self.out.damaged.append(ChunkDamage(d.offset, d.why, d.start_ns, d.end_ns))
+        if entries is None:
+            self.out.losses.append(Loss(ALL_TOPICS, d.start_ns, d.end_ns, None, cause))
+            return
+        for cid, es in sorted(entries.items()):
+            lost = [t for t, off in es if off >= at]
+            if lost:
+                ch = self.channels.get(cid)
+                topic = ch.topic if ch is not None else f"<channel {cid}>"
+                self.out.losses.append(Loss(topic, min(lost), max(lost), len(lost), cause))
+        if not index_whole:
+            self.out.losses.append(
+                Loss(ALL_TOPICS, d.start_ns, d.end_ns, None, f"{cause}; its message index is cut short")
+            )
+
+    def _entries(
+        self, d: _Damaged, index: list[MessageIndex] | None
+    ) -> dict[int, list[tuple[int, int]]] | None:
+        """channel id -> (log time, offset) of the chunk's messages, if its index is plausible."""
+        if not index:
+            return None
+        out: dict[int, list[tuple[int, int]]] = {}
+        for mi in index:
+            if not all(d.start_ns <= t <= d.end_ns and 0 <= off < d.size for t, off in mi.records):
+                return None
+            out.setdefault(mi.channel_id, []).extend(mi.records)
+        return out
+
+    def orphan_losses(self) -> None:
+        for cid, (n, first, last) in sorted(self.orphans.items()):
+            self.out.losses.append(
+                Loss(f"<channel {cid}>", first, last, n, f"channel {cid} is defined in a lost chunk")
+            )
 
 
-def _records(f: BinaryIO, size: int) -> Iterator[Any]:
-    """Records of the file in order; no record may claim more bytes than the file has."""
-    return StreamReader(f, emit_chunks=True, record_size_limit=max(size, 1)).records
+_PARSED: dict[int, Any] = {
+    Opcode.CHUNK: Chunk,
+    Opcode.MESSAGE_INDEX: MessageIndex,
+    Opcode.SCHEMA: Schema,
+    Opcode.CHANNEL: Channel,
+    Opcode.DATA_END: DataEnd,
+    Opcode.FOOTER: Footer,
+}
+RECORD_OPCODES = frozenset(int(op) for op in Opcode)  # 0x01 (Header) .. 0x0F (DataEnd)
+
+
+def _records(f: BinaryIO, size: int) -> Iterator[tuple[int, Any]]:
+    """(offset, record) of the file's records in order (None for those recovery skips).
+
+    No record may claim more bytes than the file has, and each must parse within its length.
+
+    Raises:
+        InvalidMagic: not an MCAP file.
+        EndOfFile: the file ends inside a record (cut short, or a length is damaged).
+        NotRecordsError: where a record should start, bytes that are no record.
+        ValueError: a record's contents are unreadable.
+    """
+    read_magic(ReadDataStream(f))
+    pos = 8
+    while True:
+        head = f.read(9)
+        if head and head[0] not in RECORD_OPCODES:
+            raise NotRecordsError(pos)
+        if len(head) < 9:
+            raise EndOfFile()
+        opcode, length = struct.unpack("<BQ", head)
+        if length > size - pos - 9:
+            raise EndOfFile()
+        body = f.read(length)
+        if len(body) < length:
+            raise EndOfFile()
+        kind = _PARSED.get(opcode)
+        if opcode == Opcode.MESSAGE:
+            kind = Message
+        rec = None
+        if kind is not None:
+            try:
+                stream = ReadDataStream(BytesIO(body))
+                rec = kind.read(stream, length) if kind is Message else kind.read(stream)
+            except PARSE_ERRORS:
+                raise ValueError(f"an unreadable {kind.__name__} record at byte {pos}") from None
+        yield pos, rec
+        pos += 9 + length
 
 
 def scan(
@@ -245,16 +456,22 @@ def scan(
     size = mcap.stat().st_size
     out = Salvage(mcap, size)
     take = _Collector(out, on_channel, on_message)
+    pending: _Damaged | None = None  # a damaged chunk whose MessageIndex records may follow
     with mcap.open("rb") as f:
         try:
-            for rec in _records(f, size):
+            for offset, rec in _records(f, size):
                 pos = f.tell()
+                if pending is not None and isinstance(rec, MessageIndex):
+                    pending.index.append(rec)
+                elif pending is not None:
+                    take.finish(pending, pending.index, index_whole=True)
+                    pending = None
                 if isinstance(rec, Chunk):
-                    take.chunk(rec, out.readable_bytes)
+                    pending = take.chunk(rec, offset)
                 elif isinstance(rec, (DataEnd, Footer)):
                     out.complete = True
                     break
-                else:
+                elif rec is not None and not isinstance(rec, MessageIndex):
                     take.take(rec)
                 out.readable_bytes = pos
         except InvalidMagic:
@@ -270,26 +487,58 @@ def scan(
                 if size <= 8
                 else "a record runs past the end of the file (cut short, or a damaged length)"
             )
+        except NotRecordsError:
+            out.stop_reason = (
+                f"the {size - out.readable_bytes} bytes from byte {out.readable_bytes} are not MCAP records"
+            )
         except PARSE_ERRORS as err:
             first = str(err).strip().splitlines()[0] if str(err).strip() else ""
             out.stop_reason = f"{type(err).__name__}: {first}" if first else type(err).__name__
         if out.stop_reason:
             out.tail_chunk = _tail_chunk_times(f, out.readable_bytes, size)
+        summary = _summary(f, size)
+        if pending is not None:  # reading stopped among its message indexes: the summary may know them
+            ci = (
+                next((c for c in summary.chunk_indexes if c.chunk_start_offset == pending.offset), None)
+                if summary
+                else None
+            )
+            index = _indexes_at(f, ci, size) if ci is not None else None
+            if index is not None:
+                take.finish(pending, index, index_whole=True)
+            else:
+                take.finish(pending, pending.index, index_whole=out.complete)
         # chunks the summary indexes beyond where reading stopped (none in a healthy file)
-        if _resume_from_summary(f, size, out, take) and out.complete:
+        if _resume_from_summary(f, size, out, take, summary) and out.complete:
             out.stop_reason = "a damaged record read as the end of the data"
         if out.complete:
             out.readable_bytes = size
+        if out.tail_chunk is not None:
+            start, end = out.tail_chunk
+            out.losses.append(
+                Loss(
+                    ALL_TOPICS,
+                    start,
+                    end,
+                    None,
+                    f"the file ends inside the chunk at byte {out.readable_bytes}",
+                )
+            )
+        take.orphan_losses()
     return out
 
 
-def _resume_from_summary(f: BinaryIO, size: int, out: Salvage, take: _Collector) -> int:
-    """Read the chunks the summary section indexes beyond where reading stopped; how many."""
+def _summary(f: BinaryIO, size: int) -> Any:
+    """The file's summary section, if it has a readable one."""
     try:
         f.seek(0)  # the reader checks the magic where the stream stands
-        summary = SeekingReader(f, record_size_limit=max(size, 1)).get_summary()
+        return SeekingReader(f, record_size_limit=max(size, 1)).get_summary()
     except Exception:  # no (readable) summary: an unfinished file, the usual case
-        return 0
+        return None
+
+
+def _resume_from_summary(f: BinaryIO, size: int, out: Salvage, take: _Collector, summary: Any) -> int:
+    """Read the chunks the summary section indexes beyond where reading stopped; how many."""
     if summary is None:
         return 0
     later = sorted(
@@ -307,12 +556,19 @@ def _resume_from_summary(f: BinaryIO, size: int, out: Salvage, take: _Collector)
         try:
             rec = _chunk_at(f, ci.chunk_start_offset, ci.chunk_length, size)
         except BadChunkError as err:
-            out.damaged.append(
-                ChunkDamage(ci.chunk_start_offset, str(err), ci.message_start_time, ci.message_end_time)
+            damaged: _Damaged | None = _Damaged(
+                ci.chunk_start_offset,
+                ci.message_start_time,
+                ci.message_end_time,
+                ci.uncompressed_size,
+                str(err),
+                ChunkRecords([], 0),
             )
-            continue
-        take.chunk(rec, ci.chunk_start_offset)
-        out.resumed_from_index += 1
+        else:
+            damaged = take.chunk(rec, ci.chunk_start_offset)
+            out.resumed_from_index += damaged is None
+        if damaged is not None:
+            take.finish(damaged, _indexes_at(f, ci, size), index_whole=True)
     return len(later)
 
 
