@@ -26,6 +26,7 @@ from shapely.geometry import Polygon
 
 from conftest import run_cli
 from simlan_data.algorithms.safety.geometry import footprint_polygon
+from simlan_data.evaluation.metrics_io import load_metrics
 from simlan_data.world.agent_types import AGENT_TYPES
 
 ZONE = [[2.6, -2.4], [4.5, -2.4], [4.5, 3.2], [2.6, 3.2]]
@@ -177,7 +178,7 @@ def test_counterfactual_replay_reproduces_live_then_a_new_zone_changes_the_verdi
         module="simlan_data.replay",
     )
     assert same.returncode == 0, same.stderr
-    metrics = json.loads((tmp_path / "same" / "metrics.json").read_text())
+    metrics = load_metrics(tmp_path / "same" / "metrics.json")  # strict JSON: NaN is null
     assert metrics["replay.safety.events_diff_to_live"] == 0
     assert np.isnan(metrics["replay.safety.diverged_s"])
     # a bay on the Jackal's way north, which it really drove through before it was stopped blind

@@ -8,13 +8,13 @@ hits the truck's side, guarded they keep apart.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import pytest
 
 from conftest import run_cli
+from simlan_data.evaluation.metrics_io import load_metrics
 
 pytestmark = pytest.mark.slow
 
@@ -23,7 +23,7 @@ def _run(tmp_path: Path, *overrides: str) -> dict[str, float]:
     run_dir = tmp_path / "run"
     proc = run_cli(*overrides, f"hydra.run.dir={run_dir}", "progress=false", timeout=1800)
     assert proc.returncode == 0, proc.stderr
-    return json.loads((run_dir / "metrics.json").read_text())
+    return load_metrics(run_dir / "metrics.json")  # strict JSON: NaN is null
 
 
 @pytest.mark.parametrize("scenario", ["restricted_zone", "blind_spot", "humanoid_crossing"])

@@ -22,6 +22,7 @@ from simlan_data.apps.cli import run_cli
 from simlan_data.constants import METRICS_FILENAME, NS_PER_S
 from simlan_data.errors import ConfigError
 from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
+from simlan_data.evaluation.metrics_io import write_metrics
 from simlan_data.evaluation.replay import REPLAY_ALGORITHMS, ReplayContext
 from simlan_data.recording import schema
 from simlan_data.recording.reader import RecordingReader
@@ -128,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         duration_s = reader.duration_ns / NS_PER_S
         metrics["replay.wall_s"] = wall
         metrics["replay.speed_x_realtime"] = duration_s / wall if wall > 0 else 0.0
-        (out / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+        write_metrics(out / METRICS_FILENAME, metrics)  # strict JSON: null for NaN and inf
         print(
             f"replayed {reader.path} ({duration_s:.1f} s) through {', '.join(names)} in {wall:.1f} s ({metrics['replay.speed_x_realtime']:.1f}x real time)"
         )

@@ -34,6 +34,7 @@ from omegaconf import OmegaConf
 
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from simlan_data.errors import ConfigError, SimlanError
+from simlan_data.evaluation.metrics_io import load_metrics, write_metrics
 from simlan_data.evaluation.stats import Interval, baseline_change, bound_ok, difference_interval, interval
 from simlan_data.evaluation.suite_spec import RUN_SOURCE, Case, Check, Fault, Suite
 
@@ -329,7 +330,7 @@ def replay_one(
         return {}, err.line()
     except Exception as err:  # an algorithm that crashes is a failed check, not a crashed suite
         return {}, f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
-    (out / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+    write_metrics(out / METRICS_FILENAME, metrics)  # strict JSON: null for NaN and inf
     return metrics, ""
 
 
@@ -381,7 +382,7 @@ def collect_run_metrics(jobs: list[Job]) -> None:
         if job.error:
             job.errors[RUN_SOURCE] = job.error
         elif path.is_file():
-            job.sources[RUN_SOURCE] = {k: float(v) for k, v in json.loads(path.read_text()).items()}
+            job.sources[RUN_SOURCE] = {k: float(v) for k, v in load_metrics(path).items()}
         else:
             job.errors[RUN_SOURCE] = f"no {METRICS_FILENAME} in {job.run_dir}"
 

@@ -19,7 +19,6 @@ An experiment names its report in its config::
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -29,8 +28,10 @@ import yaml
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
+from simlan_data.config.safe_yaml import load_yaml
 from simlan_data.constants import METRICS_FILENAME
 from simlan_data.errors import ConfigError
+from simlan_data.evaluation.metrics_io import load_metrics
 from simlan_data.evaluation.sweep_reports import SWEEP_REPORTS, SweepReport, register_sweep_report
 
 __all__ = [
@@ -53,7 +54,7 @@ def _overrides(job_dir: Path) -> dict[str, Any]:
     if not path.is_file():
         return {}
     out: dict[str, Any] = {}
-    for item in yaml.safe_load(path.read_text()) or []:
+    for item in load_yaml(path, what="Hydra overrides file") or []:
         key, _, value = str(item).partition("=")
         key = key.lstrip("+~")
         try:
@@ -94,7 +95,7 @@ def collect_sweep(sweep_dir: str | Path) -> pl.DataFrame:
         metrics_path = job / METRICS_FILENAME
         if metrics_path.is_file():
             row["status"] = "ok"
-            row.update({k: float(v) for k, v in json.loads(metrics_path.read_text()).items()})
+            row.update({k: float(v) for k, v in load_metrics(metrics_path).items()})  # null: NaN
         else:
             row["status"] = "failed"
         rows.append(row)
