@@ -53,6 +53,7 @@ from simlan_data.evaluation.birdseye_metrics import (
     stitcher_projections,
 )
 from simlan_data.evaluation.replay import ReplayContext, check_options, register
+from simlan_data.imaging.image_files import write_image
 from simlan_data.recording.codecs import decode_compressed, decode_raw
 from simlan_data.recording.reader import Message
 from simlan_data.world.layout import load_layout
@@ -372,7 +373,7 @@ def write_report(
         "",
     ]
     if last is not None:
-        cv2.imwrite(str(out_dir / LAST_PNG), cv2.cvtColor(last, cv2.COLOR_RGB2BGR))
+        write_image(out_dir / LAST_PNG, cv2.cvtColor(last, cv2.COLOR_RGB2BGR))
         lines += [f"Last canvas at full resolution: `{LAST_PNG}`.", ""]
     if not summary and spec.plane_z_m != 0.0:
         lines += ["Quality is scored on the floor only (plane_z_m = 0); this canvas lies above it.", ""]
@@ -408,7 +409,7 @@ def write_report(
     if truth is not None:
         panels.append(_panel(truth, "ground truth (orthographic render)", 1050))
     if panels:
-        cv2.imwrite(str(out_dir / REPORT_PNG), cv2.cvtColor(np.vstack(panels), cv2.COLOR_RGB2BGR))
+        write_image(out_dir / REPORT_PNG, cv2.cvtColor(np.vstack(panels), cv2.COLOR_RGB2BGR))
         lines += [f"![ours, SIMLAN's method, ground truth]({REPORT_PNG})", ""]
     lines += ["## Metrics", "", "| metric | value |", "| --- | --- |"]
     lines += [f"| `{k}` | {v:.6g} |" for k, v in sorted(metrics.items())]

@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 
 from simlan_data.constants import NS_PER_S, REPORT_FILENAME
+from simlan_data.imaging.image_files import write_image
 from simlan_data.recording.codecs import decode_compressed, decode_raw
 from simlan_data.recording.reader import RecordingReader
 
@@ -64,7 +65,7 @@ def write_report(
 ) -> Path:
     mosaic = camera_mosaic(last_images(reader))
     if mosaic is not None:
-        cv2.imwrite(str(run_dir / MOSAIC_FILENAME), cv2.cvtColor(mosaic, cv2.COLOR_RGB2BGR))
+        write_image(run_dir / MOSAIC_FILENAME, cv2.cvtColor(mosaic, cv2.COLOR_RGB2BGR))  # OSError if not
     lines = [
         f"# Run report: {cfg.scenario.name}",
         "",

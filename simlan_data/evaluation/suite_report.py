@@ -30,6 +30,7 @@ from simlan_data.evaluation.birdseye_replay import REPORT_PNG as BIRDSEYE_PNG
 from simlan_data.evaluation.metrics import estimates_from_recording, ground_truth
 from simlan_data.evaluation.suite import FAILING, Job
 from simlan_data.evaluation.suite_spec import Case, Fault, Suite
+from simlan_data.imaging.image_files import write_image
 from simlan_data.recording.reader import RecordingReader
 
 REPORT_NAME = "report.md"
@@ -323,7 +324,7 @@ def copy_birdseye(path: Path, jobs: list[Job], out: Path) -> Path | None:
             if img is None:
                 continue
             scale = 900 / img.shape[1]
-            cv2.imwrite(str(path), cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA))
+            write_image(path, cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA))
             return path
     return None
 

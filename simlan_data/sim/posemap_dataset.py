@@ -34,6 +34,7 @@ from simlan_data.config.schema import Config
 from simlan_data.constants import METRICS_FILENAME
 from simlan_data.errors import ConfigError
 from simlan_data.geometry.camera import CameraModel
+from simlan_data.imaging.image_files import write_image
 from simlan_data.sim.agents import spawn_agent
 from simlan_data.sim.humanoid import PosedHumanoidAgent
 from simlan_data.sim.pybullet_client import Client, connect
@@ -227,7 +228,7 @@ def _capture(
         if i < pm.save_images and views[0].rgb is not None:
             image_dir.mkdir(parents=True, exist_ok=True)
             tiles = [_draw(v.rgb, lm[i, k]) for k, v in enumerate(views) if v.rgb is not None]
-            cv2.imwrite(str(image_dir / f"sample_{i:05d}.png"), np.hstack(tiles))
+            write_image(image_dir / f"sample_{i:05d}.png", np.hstack(tiles))
 
 
 def _meta(cfg: Config, rig: CaptureRig, estimator: PoseEstimator, rays: bool) -> dict[str, Any]:
