@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import shutil
 import struct
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,17 @@ class Case:
 
 
 # ------------------------------------------------------------------------------------ config
+def _alias_bomb_dir() -> list[str]:
+    """Overrides selecting a spawn list of ~400 bytes whose YAML aliases stand for 9**9 values
+    (composition hung, killed after 150 s), from a ``hydra.searchpath`` directory."""
+    conf = Path(tempfile.mkdtemp(prefix="alias_bomb_"))
+    (conf / "agents").mkdir()
+    lines = ["# @package agents", "a0: &a0 [" + ",".join("x" * 9) + "]"]
+    lines += [f"a{i}: &a{i} [" + ",".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 9)]
+    (conf / "agents" / "boom.yaml").write_text("\n".join(lines) + "\n")
+    return [f"hydra.searchpath=[file://{conf}]", "agents=boom"]
+
+
 # fmt: off
 CONFIG_CASES = [
     Case(*c)
@@ -124,6 +136,7 @@ CONFIG_CASES = [
         ("list given by an interpolation", ["faults.drop_cameras=${now:%Y}"], r"invalid faults.drop_cameras='\$\{now:%Y\}' in config: Invalid value assigned: str is not a ListConfig, list or tuple"),
         ("override syntax", ["x=[1,2"], r"invalid override in command line: .*; write KEY=VALUE"),
         ("missing mandatory", ["cameras.ids=???"], r"missing value for cameras.ids in config: the key has no default"),
+        ("alias bomb in a spawn list (config dir)", _alias_bomb_dir, r"config file too large in .*boom.yaml: YAML aliases expand to more than 100000 nodes \(an alias bomb\?\); write the values out"),
     ]
 ]
 # fmt: on
@@ -131,7 +144,7 @@ CONFIG_CASES = [
 
 def run_config_case(case: Case) -> None:
     """Compose, check and load the inputs as a run does before writing anything."""
-    cfg = compose_config(case.arg)  # type: ignore[arg-type]
+    cfg = compose_config(case.arg() if callable(case.arg) else case.arg)  # type: ignore[arg-type]
     load_inputs(cfg)
 
 
