@@ -164,7 +164,7 @@ def config_dirs(argv: Sequence[str], *, app_dir: Path | None = None) -> list[Pat
             continue
         raw = Path(item.removeprefix("file://"))
         candidates = [raw] if raw.is_absolute() else [Path.cwd() / raw] + ([app_dir / raw] if app_dir else [])
-        for path in candidates:
+        for path in map(Path, map(os.path.abspath, candidates)):
             if path.is_dir() and path not in dirs:
                 dirs.append(path)
     return dirs
