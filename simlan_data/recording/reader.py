@@ -7,10 +7,12 @@ import os
 import pickle
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 from typing import Any
 
 import yaml
+from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
@@ -18,6 +20,7 @@ from rosbags.typesys.store import Typestore
 from simlan_data.constants import FORMAT_MAJOR, NS_PER_S, RECORDING_DIRNAME
 from simlan_data.errors import RecordingInputError
 from simlan_data.recording import losses, schema
+from simlan_data.recording.bounded import load_yaml_without_aliases, require_regular
 from simlan_data.recording.run_marker import read_running, writer_alive
 
 METADATA_KEY_FORMAT = "simlan.format_version"
@@ -52,6 +55,36 @@ def _bad(path: Path, why: str, fix: str = "") -> RecordingInputError:
     return RecordingInputError("not a readable recording", str(path), why, fix)
 
 
+@cache
+def _types_by_suffix() -> tuple[dict[str, tuple[str, ...]], dict[str, tuple[str, ...]]]:
+    """({topic suffix of a camera: types}, {topic suffix of an agent: types}) from :mod:`schema`,
+    for every encoding a camera's streams can have."""
+    cameras: dict[str, set[str]] = {}
+    for rgb, other in (("raw", "raw"), ("jpeg", "png")):
+        for t in schema.camera_topics("X", rgb=rgb, depth=other, semantic=other).values():
+            cameras.setdefault(t.name.removeprefix("/camera_X"), set()).add(t.msgtype)
+    agents = {t.name.removeprefix("/NS"): {t.msgtype} for t in schema.agent_topics("NS").values()}
+    return (
+        {k: tuple(sorted(v)) for k, v in cameras.items()},
+        {k: tuple(sorted(v)) for k, v in agents.items()},
+    )
+
+
+def expected_types(topic: str) -> tuple[str, ...]:
+    """The message types :mod:`schema` allows on ``topic``; () for a topic it does not name."""
+    for t in schema.GLOBAL_TOPICS:
+        if t.name == topic:
+            return (t.msgtype,)
+    cameras, agents = _types_by_suffix()
+    if topic.startswith("/camera_"):
+        _, _, rest = topic[len("/camera_") :].partition("/")
+        return cameras.get(f"/{rest}", ())
+    parts = topic.split("/")
+    if len(parts) == 3 and parts[0] == "" and parts[1]:
+        return agents.get(f"/{parts[2]}", ())
+    return ()
+
+
 def _unfinished(path: Path) -> RecordingInputError:
     """The error for a bag directory with an MCAP file but no metadata.yaml."""
     marker = read_running(path.parent)
@@ -75,12 +108,15 @@ class RecordingReader:
 
     def __init__(self, path: Path | str, *, check_format: bool = True) -> None:
         p = Path(path)
+        if p.exists() and not p.is_dir():  # (a FIFO or device given as the recording: never opened)
+            require_regular(p, "recording path")
         if p.is_file() and p.name == "metadata.yaml":
             p = p.parent
         if p.is_dir() and not (p / "metadata.yaml").exists() and (p / RECORDING_DIRNAME).is_dir():
             p = p / RECORDING_DIRNAME  # a run directory
         if not p.exists():
             raise _bad(p, "no such file or directory", "check the path")
+        require_regular(p / "metadata.yaml", "recording metadata")
         if not (p / "metadata.yaml").is_file():
             if p.is_dir() and any(p.glob("*.mcap")):
                 raise _unfinished(p)
@@ -88,6 +124,9 @@ class RecordingReader:
         self.path = p
         self._store: Typestore = schema.typestore()
         self._metadata = _read_metadata(p)  # size and fields checked before rosbags trusts them
+        files = [p / str(f) for f in self._metadata.get("relative_file_paths") or []]
+        for f in files:  # rosbags opens them: a FIFO would block it
+            require_regular(f, "recording file", missing_ok=True)
         try:
             self._reader = Reader(p)
             self._reader.open()
@@ -101,6 +140,7 @@ class RecordingReader:
             raise _bad(p, f"{type(err).__name__}: {_first(err)}") from err
         if not all(isinstance(n, int) and not isinstance(n, bool) for n in counts):
             raise _bad(p, "metadata.yaml holds a message count or time that is not an integer")
+        _check_counts_against_files(p, self._metadata, files)
         self._small: list[tuple[Any, int, bytes]] | None = None  # see STREAMED_TYPES
         self._small_pickled: bytes | None = None  # see adopt_small_topics
         self._register_bag_types()
@@ -185,6 +225,23 @@ class RecordingReader:
                 ", ".join(missing),
                 "record with a config that publishes them",
             )
+        self.check_types(names)
+
+    def check_types(self, topics: Iterable[str] | None = None) -> None:
+        """Refuse a topic about to be read whose type is not the one :mod:`schema` gives its name
+        (a wrong schema made replays fail with a KeyError or AttributeError deep inside)."""
+        wanted = None if topics is None else set(topics)
+        for c in self._reader.connections:
+            if wanted is not None and c.topic not in wanted:
+                continue
+            expected = expected_types(c.topic)
+            if expected and c.msgtype not in expected:
+                raise RecordingInputError(
+                    f"recording topic {c.topic} has the wrong message type",
+                    str(self.path),
+                    f"found {c.msgtype}, expected {' or '.join(expected)} (simlan_data.recording.schema)",
+                    "record it with simlan_data, or make the tool that wrote it publish that type",
+                )
 
     def _register_bag_types(self) -> None:
         """Register message types that the bag defines and our typestore lacks."""
@@ -215,6 +272,7 @@ class RecordingReader:
         conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if not conns:
             return
+        self.check_types(wanted)
         try:
             for conn, stamp, data in self._raw_messages(conns, start_ns, stop_ns):
                 message = Message(conn.topic, int(stamp), conn.msgtype, data)
@@ -326,6 +384,7 @@ class RecordingReader:
         conns = [c for c in self._reader.connections if c.topic == topic]
         if not conns:
             return None
+        self.check_types([topic])
         for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
             try:
                 msg = self._store.deserialize_cdr(data, conn.msgtype)
@@ -348,6 +407,7 @@ class RecordingReader:
         out: dict[str, Message] = {}
         if not conns:
             return out
+        self.check_types(present)
         for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
             if conn.topic not in out:
                 out[conn.topic] = self.deserialize(Message(conn.topic, int(stamp), conn.msgtype, data))
@@ -398,16 +458,22 @@ class RecordingReader:
         self.close()
 
 
-MAX_METADATA_BYTES = 16 << 20
+# simlan_data writes a few KiB (about 300 bytes a topic); PyYAML and then rosbags' ruamel parse
+# 256 KiB in about 1.5 s together (a MiB took 7 s)
+MAX_METADATA_BYTES = 256 << 10
 
 
 def _read_metadata(path: Path) -> dict[str, Any]:
     """The rosbag2_bagfile_information of metadata.yaml (already validated by rosbags)."""
     meta = path / "metadata.yaml"
-    if meta.stat().st_size > MAX_METADATA_BYTES:
-        raise _bad(path, f"metadata.yaml is larger than {MAX_METADATA_BYTES} bytes")
+    st = require_regular(meta, "recording metadata", missing_ok=False)
+    if st is not None and st.st_size > MAX_METADATA_BYTES:
+        raise _bad(
+            path,
+            f"metadata.yaml is {st.st_size} bytes, more than the {MAX_METADATA_BYTES} a recording's has room for",
+        )
     try:
-        data = yaml.safe_load(meta.read_text())
+        data = load_yaml_without_aliases(meta.read_bytes()[: MAX_METADATA_BYTES + 1])
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise _bad(path, f"metadata.yaml unreadable: {_first(err)}") from err
     except RecursionError:
@@ -453,6 +519,48 @@ def _check_metadata_fields(path: Path, info: dict[str, Any]) -> None:
         ):
             raise _bad(
                 path, f"metadata.yaml topics_with_message_count[{i}] lacks a name, type or integer count"
+            )
+
+
+def _check_counts_against_files(path: Path, info: dict[str, Any], files: list[Path]) -> None:
+    """metadata.yaml's message counts, start and duration against the MCAP files' own summary
+    statistics (rosbags takes metadata.yaml's on trust: ``message_count: 10**23`` was printed as
+    is). Files without a summary are not checked (rosbags refuses those anyway)."""
+    total, per_topic, first, last = 0, dict[str, int](), None, None
+    for f in files:
+        try:
+            with f.open("rb") as fh:
+                summary = make_reader(fh).get_summary()
+        except Exception:  # rosbags read it: only its summary is unusable here
+            return
+        if summary is None or summary.statistics is None:
+            return
+        stats = summary.statistics
+        total += stats.message_count
+        for cid, n in stats.channel_message_counts.items():
+            topic = summary.channels[cid].topic if cid in summary.channels else f"channel {cid}"
+            per_topic[topic] = per_topic.get(topic, 0) + n
+        if stats.message_count:
+            first = min(first if first is not None else stats.message_start_time, stats.message_start_time)
+            last = max(last if last is not None else stats.message_end_time, stats.message_end_time)
+    claimed: dict[str, int] = {}
+    for entry in info.get("topics_with_message_count") or []:
+        name = entry["topic_metadata"]["name"]
+        claimed[name] = claimed.get(name, 0) + entry["message_count"]
+    wrong = [("message_count", info["message_count"], total)]
+    wrong += [
+        (f"topics_with_message_count {t}", claimed.get(t, 0), per_topic.get(t, 0))
+        for t in sorted(set(claimed) | set(per_topic))
+    ]
+    if first is not None and last is not None:
+        wrong.append(("starting_time", info["starting_time"]["nanoseconds_since_epoch"], first))
+        wrong.append(("duration", info["duration"]["nanoseconds"], last - first))
+    for key, said, found in wrong:
+        if said != found:
+            raise _bad(
+                path,
+                f"metadata.yaml {key} is {said}, but its MCAP file's summary says {found}",
+                f"run `python -m simlan_data.recover {path}` to rebuild metadata.yaml from the file",
             )
 
 

@@ -35,6 +35,7 @@ from simlan_data.constants import DAMAGED_SUFFIX, NS_PER_S, RECORDING_DIRNAME
 from simlan_data.errors import RecordingError, RecordingInputError
 from simlan_data.recording import losses as L
 from simlan_data.recording import schema
+from simlan_data.recording.bounded import require_regular
 from simlan_data.recording.reader import METADATA_KEY_FORMAT, RecordingReader
 from simlan_data.recording.run_marker import RunMarker, mark_incomplete, read_running, writer_alive
 from simlan_data.recording.salvage import Salvage, scan
@@ -217,6 +218,8 @@ def all_losses(salvage: Salvage, reached_s: float | None) -> list[L.Loss]:
 
 # --------------------------------------------------------------------------------- writing
 def _find_mcap(bag: Path) -> Path:
+    for p in bag.glob("*.mcap"):
+        require_regular(p, "recording file")  # (a FIFO: opening it would block)
     files = sorted(p for p in bag.glob("*.mcap") if p.is_file())
     if not files:
         raise RecordingInputError(

@@ -44,6 +44,7 @@ else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
 
 from simlan_data.errors import RecordingInputError
 from simlan_data.recording import schema
+from simlan_data.recording.bounded import require_regular
 from simlan_data.recording.losses import ALL_TOPICS, Loss
 
 MAX_CHUNK_BYTES = (
@@ -453,6 +454,7 @@ def scan(
     Raises:
         RecordingInputError: the file is not an MCAP file at all.
     """
+    require_regular(mcap, "recording file")  # (a FIFO: opening it would block)
     size = mcap.stat().st_size
     out = Salvage(mcap, size)
     take = _Collector(out, on_channel, on_message)
