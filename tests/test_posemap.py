@@ -220,7 +220,7 @@ def test_dataset_is_deterministic_per_seed(tmp_path: Path) -> None:
     assert (tmp_path / "a" / ".hydra" / "config.yaml").is_file()
     # the same run directory is never overwritten
     again = run_cli(*DATASET_ARGS, "posemap.samples=6", f"hydra.run.dir={tmp_path / 'a'}")
-    assert again.returncode == 2 and "dataset exists" in _one_error_line(again.stderr)
+    assert again.returncode == 2 and "run directory not empty" in _one_error_line(again.stderr)
 
 
 def test_split_is_by_sample_and_stable() -> None:

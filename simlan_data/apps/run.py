@@ -10,7 +10,6 @@ after a crash, ``python -m simlan_data.recover RUN_DIR`` repairs the recording.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import time
@@ -34,6 +33,7 @@ from simlan_data.config.validation import to_config
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from simlan_data.errors import ConfigError, PluginError, RunError, SimlanError
 from simlan_data.evaluation.localization_replay import recording_metrics
+from simlan_data.evaluation.metrics_io import write_metrics
 from simlan_data.evaluation.replay import ReplayContext
 from simlan_data.evaluation.report import write_report
 from simlan_data.evaluation.safety_metrics import recording_safety_metrics
@@ -126,10 +126,10 @@ def execute(
             ctx = ReplayContext(reader, run_dir)
             metrics.update(recording_metrics(reader, ctx.config, ctx.cameras))
             metrics.update(recording_safety_metrics(reader, ctx.config, ctx.cameras))
-            (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+            write_metrics(run_dir / METRICS_FILENAME, metrics)
             write_report(run_dir, cfg, stats, metrics, reader)
     else:
-        (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+        write_metrics(run_dir / METRICS_FILENAME, metrics)
     marker.unlink()
     if not stats.stopped_early:  # (an interrupted run says so in its one error line)
         print_summary(cfg, stats, metrics, run_dir)

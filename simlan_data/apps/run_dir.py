@@ -163,6 +163,13 @@ class CheckBeforeRunDir(Callback):
         with read_write(task), open_dict(task):
             del task["hydra"]
         try:
+            if OmegaConf.select(config, "hydra.output_subdir") is not None:
+                raise ConfigError.invalid(
+                    "hydra.output_subdir",
+                    OmegaConf.select(config, "hydra.output_subdir"),
+                    "Hydra would write it before the config is checked and the directory claimed",
+                    "leave it unset: the run writes .hydra/ itself once it owns the directory",
+                )
             to_config(task)
             if run_dir.is_dir():  # an existing directory: refused if it is in use or holds anything
                 claim(run_dir).close()

@@ -71,6 +71,15 @@ def write_report(
         "",
         cfg.scenario.description or "",
         "",
+        *(
+            [
+                f"**Stopped early** at {metrics['sim.duration_s']:.2f} s of {cfg.duration_s:g} s simulated "
+                "(a signal: see `INTERRUPTED`); everything below is what ran.",
+                "",
+            ]
+            if metrics.get("run.stopped_early")
+            else []
+        ),
         "| | |",
         "| --- | --- |",
         f"| seed | {cfg.seed} |",
