@@ -31,6 +31,7 @@ TOP_LEVEL_MODULES = {
     "errors",
     "constants",
     "seeding",
+    "metrics_io",
     "run",
     "replay",
     "evals",

@@ -21,7 +21,7 @@ def strict_loads(text: str) -> object:
 
 
 def test_dumps_metrics_is_strict_and_reads_back_as_nan() -> None:
-    from simlan_data.evaluation.metrics_io import dumps_metrics, loads_metrics
+    from simlan_data.metrics_io import dumps_metrics, loads_metrics
 
     metrics = {"a": math.nan, "b": math.inf, "c": -math.inf, "d": 1.5, "e": np.float64("nan"), "f": 3}
     text = dumps_metrics(metrics)

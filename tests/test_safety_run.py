@@ -26,7 +26,7 @@ from shapely.geometry import Polygon
 
 from conftest import run_cli
 from simlan_data.algorithms.safety.geometry import footprint_polygon
-from simlan_data.evaluation.metrics_io import load_metrics
+from simlan_data.metrics_io import load_metrics
 from simlan_data.world.agent_types import AGENT_TYPES
 
 ZONE = [[2.6, -2.4], [4.5, -2.4], [4.5, 3.2], [2.6, 3.2]]

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from conftest import run_cli
-from simlan_data.evaluation.metrics_io import load_metrics
+from simlan_data.metrics_io import load_metrics
 
 pytestmark = pytest.mark.slow
 

@@ -32,10 +32,10 @@ from simlan_data.errors import EXIT_BAD_INPUT, ConfigError, SimlanError
 from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
 from simlan_data.evaluation.birdseye_replay import birdseye_settings
 from simlan_data.evaluation.localization_replay import selected_localizer
-from simlan_data.evaluation.metrics_io import write_metrics
 from simlan_data.evaluation.posemap_replay import selected_mapper
 from simlan_data.evaluation.replay import REPLAY_ALGORITHMS, ReplayContext
 from simlan_data.evaluation.safety_inputs import selected_safety
+from simlan_data.metrics_io import write_metrics
 from simlan_data.recording import schema
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.recording.recover import recover

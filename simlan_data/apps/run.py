@@ -33,10 +33,10 @@ from simlan_data.config.validation import to_config
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from simlan_data.errors import ConfigError, PluginError, RunError, SimlanError
 from simlan_data.evaluation.localization_replay import recording_metrics
-from simlan_data.evaluation.metrics_io import write_metrics
 from simlan_data.evaluation.replay import ReplayContext
 from simlan_data.evaluation.report import write_report
 from simlan_data.evaluation.safety_metrics import recording_safety_metrics
+from simlan_data.metrics_io import write_metrics
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.recording.run_marker import RunMarker, write_running
 from simlan_data.sim.scene import load_inputs
@@ -121,6 +121,7 @@ def execute(
     metrics["job.encode_threads"] = float(cfg.recording.encode_threads)
     metrics["job.gl_threads"] = float(os.environ.get("LP_NUM_THREADS", "-1") or -1)  # -1: Mesa's default
     metrics["run.stopped_early"] = float(stats.stopped_early)
+    marker.unlink()  # the recording is finished: a failure from here on (a full disk) needs no recovery
     if cfg.recording.enabled:
         with RecordingReader(bag) as reader:
             ctx = ReplayContext(reader, run_dir)
@@ -130,7 +131,6 @@ def execute(
             write_report(run_dir, cfg, stats, metrics, reader)
     else:
         write_metrics(run_dir / METRICS_FILENAME, metrics)
-    marker.unlink()
     if not stats.stopped_early:  # (an interrupted run says so in its one error line)
         print_summary(cfg, stats, metrics, run_dir)
     return metrics

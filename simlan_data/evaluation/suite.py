@@ -34,9 +34,9 @@ from omegaconf import OmegaConf
 
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from simlan_data.errors import ConfigError, SimlanError
-from simlan_data.evaluation.metrics_io import load_metrics, write_metrics
 from simlan_data.evaluation.stats import Interval, baseline_change, bound_ok, difference_interval, interval
 from simlan_data.evaluation.suite_spec import RUN_SOURCE, Case, Check, Fault, Suite
+from simlan_data.metrics_io import load_metrics, write_metrics
 
 JOB_GROUP = "vv_job"
 JOBS_FILE = "jobs.json"

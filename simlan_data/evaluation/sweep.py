@@ -31,8 +31,8 @@ from omegaconf import DictConfig
 from simlan_data.config.safe_yaml import load_yaml
 from simlan_data.constants import METRICS_FILENAME
 from simlan_data.errors import ConfigError
-from simlan_data.evaluation.metrics_io import load_metrics
 from simlan_data.evaluation.sweep_reports import SWEEP_REPORTS, SweepReport, register_sweep_report
+from simlan_data.metrics_io import load_metrics
 
 __all__ = [
     "SWEEP_REPORTS",

@@ -17,7 +17,6 @@ and the renderer is deterministic. Writes into the run directory ``dataset.parqu
 
 from __future__ import annotations
 
-import json
 import logging
 import tempfile
 import time
@@ -35,6 +34,7 @@ from simlan_data.constants import METRICS_FILENAME
 from simlan_data.errors import ConfigError
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.imaging.image_files import write_image
+from simlan_data.metrics_io import write_metrics
 from simlan_data.sim.agents import spawn_agent
 from simlan_data.sim.humanoid import PosedHumanoidAgent
 from simlan_data.sim.pybullet_client import Client, connect
@@ -171,7 +171,7 @@ def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> di
     )
     digest = write_dataset(run_dir, data)
     metrics = _dataset_metrics(cfg, rig, lm, loop_s, setup_s)
-    (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+    write_metrics(run_dir / METRICS_FILENAME, metrics)
     print(
         "\n".join(
             [

@@ -9,7 +9,6 @@ the run directory.
 
 from __future__ import annotations
 
-import json
 import platform
 import time
 from dataclasses import asdict
@@ -28,6 +27,7 @@ from simlan_data.algorithms.posemap.metrics import evaluate
 from simlan_data.algorithms.posemap.models import MAPPERS, PoseMapper, TrainParams, load_mapper
 from simlan_data.constants import METRICS_FILENAME
 from simlan_data.errors import ConfigError
+from simlan_data.metrics_io import write_metrics
 from simlan_data.world.skeleton import JOINT_NAMES
 
 MODEL_DIRNAME = "model"
@@ -313,7 +313,7 @@ def train(
     )
     info = _model_info(pm, data, spec, sizes, metrics, refiner, seed=seed, config_yaml=config_yaml)
     mapper.save(run_dir / MODEL_DIRNAME, info)
-    (run_dir / METRICS_FILENAME).write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+    write_metrics(run_dir / METRICS_FILENAME, metrics)
     write_report(run_dir / REPORT_NAME, metrics, info)
     _print_summary(pm, run_dir, data, spec, sizes, metrics, refiner is not None, fit_s)
     return metrics
