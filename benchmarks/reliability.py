@@ -14,7 +14,10 @@
 3. Fuzzing: the hypothesis targets of ``tests/fuzz_targets.py`` with a larger budget: examples
    run per target and outcome, uncaught exceptions (must be 0).
 4. Determinism: the small config twice: identical file bytes and payload digest.
-5. Cost of the flush policy (timed, depends on load): the default scenario with the default flush
+5. Hardening (issue 21, ``benchmarks/hardening.py``): hostile input through the CLI, timed, and
+   the issue's behaviour tests (signals, run directories, recovery losses, bounded readers,
+   full disk, strict metrics.json, repeated-run identity), each with expected and observed.
+6. Cost of the flush policy (timed, depends on load): the default scenario with the default flush
    (1 s), with flushes effectively off, and with fsync.
 
 Prints markdown for BENCHMARKS.md and the raw numbers as JSON.
@@ -34,6 +37,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+import hardening
 from reliability_helpers import (
     SMALL_RUN,
     finish_kill,
@@ -265,7 +269,9 @@ def main() -> None:
     ap.add_argument("--fuzz-examples", type=int, default=500)
     ap.add_argument("--overhead-duration", type=float, default=20.0)
     ap.add_argument(
-        "--skip", default="", help="comma-separated: kills,default_kills,bad_inputs,fuzz,determinism,overhead"
+        "--skip",
+        default="",
+        help="comma-separated: kills,default_kills,bad_inputs,fuzz,determinism,hardening,overhead",
     )
     ap.add_argument("--json", type=Path)
     args = ap.parse_args()
@@ -372,6 +378,32 @@ def main() -> None:
                 f"Small config, 4 s, run twice (PYTHONHASHSEED 1 and 2): {det['messages']} messages, payload digest equal: "
                 f"{det['payload_digest_equal']}, file bytes equal: {det['file_bytes_equal']}\n"
             )
+        if "hardening" not in skip:
+            hostile = hardening.hostile_inputs(root)
+            behaviour = hardening.behaviour_tests(root)
+            raw["hardening"] = {"hostile_inputs": hostile, "behaviour_tests": behaviour}
+            print(
+                "### Hardening (issue 21): hostile input through the CLI (expected: exit 2, one line, < 5 s)\n"
+            )
+            print(
+                table(
+                    ["case", "exit", "observed line", "wall (s)", "as expected"],
+                    [
+                        [r["case"], r["exit"], f"`{r['line']}`", r["wall_s"], "yes" if r["ok"] else "NO"]
+                        for r in hostile
+                    ],
+                )
+            )
+            print(
+                "\n### Hardening (issue 21): behaviour tests (real processes, signals, tmpfs, damaged bags)\n"
+            )
+            print(
+                table(
+                    ["test file", "expected (the test's name)", "observed", "wall (s)"],
+                    [[r["module"], r["expected"], r["observed"], r["wall_s"]] for r in behaviour],
+                )
+            )
+            print()
         if "overhead" not in skip:
             ov = overhead(root, args.overhead_duration)
             raw["overhead"] = ov
