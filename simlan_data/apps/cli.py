@@ -16,6 +16,7 @@ import yaml
 from hydra.errors import HydraException
 from omegaconf.errors import OmegaConfBaseException
 
+from simlan_data.apps.pipes import flush_stdout
 from simlan_data.config.safe_yaml import check_config_dirs
 from simlan_data.config.validation import config_error_from
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, REPORT_FILENAME
@@ -160,12 +161,16 @@ def run_cli(
     try:
         check_config_dirs(sys.argv[1:], app_dir=Path(__file__).parent)  # before Hydra reads them
         main()
+        flush_stdout()  # output piped into `head`: exit 141 quietly (apps.pipes)
     except SystemExit:
+        flush_stdout()
         raise
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM before a run handles it (apps.signals)
         signum = int(getattr(err, "signum", signal.SIGINT))
         fail(f"interrupted by {signal.Signals(signum).name}", 128 + signum)
     except BaseException as err:
+        if isinstance(err, BrokenPipeError):
+            flush_stdout(broken_pipe_seen=True)  # (stdout's reader gone: exit 141)
         if debug:
             raise
         ours = disk_error(err) or _root_simlan_error(err) or config_error_from(err)
