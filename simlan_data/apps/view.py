@@ -17,7 +17,8 @@ import time
 from pathlib import Path
 
 from simlan_data.apps.cli import run_cli
-from simlan_data.errors import ConfigError, RunError
+from simlan_data.apps.outputs import make_dirs, remove_if_empty
+from simlan_data.errors import EXIT_BAD_INPUT, ConfigError, RunError, SimlanError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,6 +45,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     save: Path | None = args.save
+    created: list[Path] = []
     if save is not None:
         if save.suffix != ".rrd":
             raise ConfigError(
@@ -53,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(
                 "output exists", str(save), "inspect never overwrites a file", "choose another --save"
             )
-        save.parent.mkdir(parents=True, exist_ok=True)
+        created = make_dirs(save.parent)
     else:
         if sys.platform.startswith("linux") and not (
             os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
@@ -69,6 +71,10 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     try:
         logged = export(args.recording, save=save, spawn=save is None, image_every=args.image_every)
+    except SimlanError as err:
+        if err.exit_code == EXIT_BAD_INPUT:  # a bad recording leaves nothing behind
+            remove_if_empty(created)
+        raise
     except (RuntimeError, OSError) as err:
         if save is None:
             first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
