@@ -228,8 +228,10 @@ class RecordingReader:
         self.check_types(names)
 
     def check_types(self, topics: Iterable[str] | None = None) -> None:
-        """Refuse a topic about to be read whose type is not the one :mod:`schema` gives its name
-        (a wrong schema made replays fail with a KeyError or AttributeError deep inside)."""
+        """Refuse any of ``topics`` (all if None) whose type is not the one :mod:`schema` gives its
+        name: for readers that interpret topics by name (a String /ground_truth/poses made replays
+        fail with a KeyError or AttributeError deep inside). Readers that dispatch on the type
+        (the Rerun export) read any type."""
         wanted = None if topics is None else set(topics)
         for c in self._reader.connections:
             if wanted is not None and c.topic not in wanted:
@@ -272,7 +274,6 @@ class RecordingReader:
         conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if not conns:
             return
-        self.check_types(wanted)
         try:
             for conn, stamp, data in self._raw_messages(conns, start_ns, stop_ns):
                 message = Message(conn.topic, int(stamp), conn.msgtype, data)
@@ -384,7 +385,6 @@ class RecordingReader:
         conns = [c for c in self._reader.connections if c.topic == topic]
         if not conns:
             return None
-        self.check_types([topic])
         for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
             try:
                 msg = self._store.deserialize_cdr(data, conn.msgtype)
@@ -407,7 +407,6 @@ class RecordingReader:
         out: dict[str, Message] = {}
         if not conns:
             return out
-        self.check_types(present)
         for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
             if conn.topic not in out:
                 out[conn.topic] = self.deserialize(Message(conn.topic, int(stamp), conn.msgtype, data))
