@@ -7,8 +7,10 @@ so is a hang (the tests run under hypothesis deadlines).
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -17,10 +19,10 @@ from mcap.reader import make_reader
 
 from simlan_data.config.validation import _typed_keys, compose_config
 from simlan_data.constants import CALIBRATION_DIR
-from simlan_data.errors import SimlanError
+from simlan_data.errors import EXIT_BAD_INPUT, SimlanError
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.recording import schema
-from simlan_data.recording.reader import RecordingReader
+from simlan_data.recording.reader import RecordingReader, expected_types
 from simlan_data.recording.recover import recover
 
 
@@ -231,6 +233,133 @@ def check_recording(files: dict[str, bytes]) -> str:
         return f"{outcome}/recover:{'written' if report.written else 'intact'}"
 
 
+# ---------------------------------------------------------------------------- hostile inputs
+# issue 21: shapes that hung a reader or crashed it; each must answer within 5 s with one line
+# and exit 2 (RecordingInputError or ConfigError), and leave no replay output behind
+HOSTILE_KINDS = (
+    "fifo",
+    "not a regular file",
+    "alias bomb",
+    "metadata too large",
+    "count inflated",
+    "wrong type",
+    "set of the wrong type",
+)
+TRUE_COUNTS = {
+    "message_count": 245,
+    "topics:/clock": 121,
+    "topics:/ground_truth/poses": 121,
+    "duration": 2 * 10**9,
+}
+WRONG_VALUES = st.one_of(
+    st.text(alphabet="abcxyz:/ ", min_size=1, max_size=6).filter(lambda t: t.strip() != ""),
+    st.sampled_from(["true", "false", "null", "[1]", "[1,2,3]", '{"a":1}', '"1.0"', "[]", "{}"]),
+)
+SET_KEYS = {"hold_s": "float", "ttc.enabled": "bool", "enabled": "bool", "collision.enabled": "bool"}
+
+
+def _fits_json(raw: str, kind: str) -> bool:
+    import json
+
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError:
+        return False
+    if kind == "bool":
+        return isinstance(value, bool)
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+@st.composite
+def hostile_inputs(draw: st.DrawFn) -> tuple[str, tuple]:
+    """(kind, parameters) of one hostile input for :func:`check_hostile`."""
+    kind = draw(st.sampled_from(HOSTILE_KINDS))
+    if kind in ("fifo", "not a regular file"):
+        return kind, (draw(st.sampled_from(["recording.mcap", "metadata.yaml", "RUNNING", "."])),)
+    if kind == "alias bomb":
+        width, depth = draw(st.integers(2, 12)), draw(st.integers(1, 12))
+        return kind, (width, depth, draw(st.booleans()))
+    if kind == "metadata too large":
+        return kind, (draw(st.integers((256 << 10) + 1, 8 << 20)),)
+    if kind == "count inflated":
+        key = draw(st.sampled_from(sorted(TRUE_COUNTS)))
+        value = draw(st.one_of(st.integers(0, 10**30), st.sampled_from([2**63, 2**64, 10**23])))
+        return kind, (key, value if value != TRUE_COUNTS[key] else value + 1)
+    if kind == "wrong type":
+        topic = draw(st.sampled_from(schema.REQUIRED_TOPICS))
+        types = (schema.STRING_TYPE, schema.CLOCK_TYPE, schema.TF_TYPE, schema.IMAGE_TYPE)
+        wrong = [t for t in types if t not in expected_types(topic)]
+        return kind, (topic, draw(st.sampled_from(wrong)))
+    key = draw(st.sampled_from(sorted(SET_KEYS)))
+    raw = draw(WRONG_VALUES.filter(lambda r: not _fits_json(r, SET_KEYS[key])))
+    return kind, (key, raw)
+
+
+def _bomb(width: int, depth: int) -> str:
+    names = [f"n{i}" for i in range(depth + 1)]
+    lines = [f"{names[0]}: &{names[0]} [{', '.join(['x'] * width)}]"]
+    lines += [
+        f"{names[i]}: &{names[i]} [{', '.join([f'*{names[i - 1]}'] * width)}]" for i in range(1, depth + 1)
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def check_hostile(case: tuple[str, tuple]) -> str:
+    """Build a small recording, make it hostile, then open and read it as a replay does (or run
+    the replay CLI's option checks); the answer must be a one-line exit-2 error within 5 s."""
+    from reliability_cases import _inflate, small_recording, wrong_type
+
+    from simlan_data.apps.replay import main as replay
+
+    kind, params = case
+    with tempfile.TemporaryDirectory(prefix="fuzz_hostile_") as tmp:
+        bag = small_recording(Path(tmp) / "run" / "recording")
+        out = Path(tmp) / "out"
+        if kind in ("fifo", "not a regular file"):
+            target = bag / params[0] if params[0] != "RUNNING" else bag.parent / "RUNNING"
+            if params[0] == ".":
+                target = bag
+            if params[0] == "RUNNING":
+                (bag / "metadata.yaml").unlink()  # an unfinished run: the reader looks at RUNNING
+            if target.is_dir():
+                shutil.rmtree(target)
+            else:
+                target.unlink(missing_ok=True)
+            os.mkfifo(target) if kind == "fifo" else target.mkdir()
+        elif kind == "alias bomb":
+            width, depth, ahead = params
+            meta = (bag / "metadata.yaml").read_text()
+            bomb = _bomb(width, depth)
+            (bag / "metadata.yaml").write_text(bomb + meta if ahead else meta + bomb)
+        elif kind == "metadata too large":
+            with (bag / "metadata.yaml").open("a") as f:
+                f.write("# " + "x" * params[0] + "\n")
+        elif kind == "count inflated":
+            _inflate(bag, *params)
+        elif kind == "wrong type":
+            wrong_type(bag, *params)
+        t0 = time.perf_counter()
+        try:
+            if kind == "set of the wrong type":
+                key, raw = params
+                replay([str(bag), "--out", str(out), "--algorithms", "safety", "--set", f"{key}={raw}"])
+            else:
+                with RecordingReader(bag) as reader:
+                    reader.require_topics(schema.REQUIRED_TOPICS)
+                    reader.summary()
+                    for _ in reader.messages():
+                        pass
+        except SimlanError as err:
+            error: SimlanError | None = err
+        else:
+            error = None
+        assert error is None or error.exit_code == EXIT_BAD_INPUT, error.line()
+        outcome = "ok" if error is None else clear(error)
+        assert time.perf_counter() - t0 < 5.0, (kind, params, time.perf_counter() - t0)
+        assert not out.exists(), "rejected input left --out behind"
+        return outcome
+
+
 TARGETS = {
     "calibration": lambda: (calibration_inputs(), check_calibration),
     "config": lambda: (config_overrides(), check_config),
@@ -248,7 +377,9 @@ def main(argv: list[str]) -> int:
     from hypothesis import HealthCheck, given, settings
 
     target, examples = argv[0], int(argv[1])
-    if target == "recording":
+    if target == "hostile":
+        strategy, check = hostile_inputs(), check_hostile
+    elif target == "recording":
         from reliability_cases import small_recording
 
         with tempfile.TemporaryDirectory() as tmp:

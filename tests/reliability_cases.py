@@ -7,6 +7,7 @@ parametrize over the same tables.
 
 from __future__ import annotations
 
+import os
 import shutil
 import struct
 import tempfile
@@ -390,6 +391,67 @@ def _set_custom(bag: Path, key: str, value: str | None) -> None:
     _meta(bag, edit)
 
 
+def _fifo(path: Path) -> None:
+    """Replace ``path`` by a FIFO (named pipe): opening it for reading blocks until a writer comes."""
+    if path.is_dir():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
+    os.mkfifo(path)
+
+
+def _not_a_file(path: Path) -> None:
+    """Replace ``path`` by a directory of the same name."""
+    path.unlink()
+    path.mkdir()
+
+
+ALIAS_BOMB = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join([f'*{chr(97 + i)}'] * 10)}]\n" for i in range(8)
+)  # 10**9 values once expanded, 400 bytes
+
+
+def _alias_bomb(bag: Path) -> None:
+    """metadata.yaml with a billion-laughs alias bomb ahead of its real content."""
+    (bag / "metadata.yaml").write_text(ALIAS_BOMB + (bag / "metadata.yaml").read_text())
+
+
+def _inflate(bag: Path, key: str, value: int) -> None:
+    """Set a count or time of metadata.yaml (``message_count``, ``topics:/clock``, ``duration``)."""
+
+    def edit(info: dict) -> None:
+        if key.startswith("topics:"):
+            for t in info["topics_with_message_count"]:
+                if t["topic_metadata"]["name"] == key[len("topics:") :]:
+                    t["message_count"] = value
+        elif key == "duration":
+            info["duration"]["nanoseconds"] = value
+        elif key == "starting_time":
+            info["starting_time"]["nanoseconds_since_epoch"] = value
+        else:
+            info[key] = value
+
+    _meta(bag, edit)
+
+
+def wrong_type(bag: Path, topic: str = schema.GROUND_TRUTH_POSES, msgtype: str = schema.STRING_TYPE) -> None:
+    """Rewrite the recording with ``topic`` declared as ``msgtype``, its messages std_msgs/String "x"."""
+    payload = bytes(schema.typestore().serialize_cdr(M.string("x"), schema.STRING_TYPE))
+    orig = bag.with_name(bag.name + ".orig")
+    bag.rename(orig)
+    with RecordingReader(orig) as r, RecordingWriter(bag, flush_period_ns=NS_PER_S // 2) as w:
+        for k, v in r.custom_data.items():
+            w.set_metadata(k, v)
+        topics = {t.name: schema.Topic(t.name, t.msgtype, "") for t in r.topics.values()}
+        topics[topic] = schema.Topic(topic, msgtype, "")
+        for m in r.messages(raw=True):
+            if m.topic == topic:
+                w.write_serialized(topics[topic], m.stamp_ns, payload)
+            else:
+                w.write_serialized(topics[m.topic], m.stamp_ns, bytes(m.msg))
+    shutil.rmtree(orig)
+
+
 # fmt: off
 RECORDING_CASES = [
     Case(*c)
@@ -413,6 +475,24 @@ RECORDING_CASES = [
         ("older major version", lambda b: _set_custom(b, "simlan.format_version", "0.9"), r"recording format 0.9 is older than this simlan_data \(1.x\)"),
         ("unreadable version", lambda b: _set_custom(b, "simlan.format_version", "one.two"), r"recording format version unreadable in .*: 'one.two'"),
         ("missing required topics", "topics", r"recording lacks required topics in .*: /tf_static, /ground_truth/poses, /simlan/config, /simlan/run_info"),
+        # issue 21: hostile inputs answer within 5 s with one line (a FIFO hung every reader)
+        ("MCAP file is a FIFO", lambda b: _fifo(b / f"{b.name}.mcap"), r"recording file is not a regular file in .*recording.mcap: it is a FIFO \(named pipe\), which is never read; replace it by the real file"),
+        ("MCAP file is a directory", lambda b: _not_a_file(b / f"{b.name}.mcap"), r"recording file is not a regular file in .*recording.mcap: it is a directory"),
+        ("metadata is a FIFO", lambda b: _fifo(b / "metadata.yaml"), r"recording metadata is not a regular file in .*metadata.yaml: it is a FIFO \(named pipe\)"),
+        ("metadata is a directory", lambda b: _not_a_file(b / "metadata.yaml"), r"recording metadata is not a regular file in .*metadata.yaml: it is a directory"),
+        ("recording path is a FIFO", lambda b: (shutil.rmtree(b), os.mkfifo(b)), r"recording path is not a regular file in .*recording: it is a FIFO \(named pipe\)"),
+        ("crashed, RUNNING marker is a FIFO", lambda b: ((b / "metadata.yaml").unlink(), os.mkfifo(b.parent / "RUNNING")), r"recording is unfinished in .*: an MCAP file without metadata.yaml"),
+        ("metadata alias bomb", _alias_bomb, r"not a readable recording in .*: metadata.yaml unreadable: YAML alias at line 2, column \d+ \(simlan_data writes none"),
+        ("metadata over 256 KiB", lambda b: (b / "metadata.yaml").write_text((b / "metadata.yaml").read_text() + "# " + "x" * (256 << 10)), r"not a readable recording in .*: metadata.yaml is \d+ bytes, more than the 262144"),
+        ("metadata message count inflated", lambda b: _inflate(b, "message_count", 10**23), r"not a readable recording in .*: metadata.yaml message_count is 100000000000000000000000, but its MCAP file's summary says 245; run `python -m simlan_data.recover .*` to rebuild metadata.yaml"),
+        ("metadata message count 1e23", lambda b: (b / "metadata.yaml").write_text((b / "metadata.yaml").read_text().replace("\n  message_count: 245\n", "\n  message_count: 1e23\n", 1)), r"not a readable recording in .*: metadata.yaml message_count is not a non-negative integer"),
+        ("metadata topic count inflated", lambda b: _inflate(b, "topics:/clock", 10**12), r"metadata.yaml topics_with_message_count /clock is 1000000000000, but its MCAP file's summary says 121"),
+        ("metadata duration inflated", lambda b: _inflate(b, "duration", 10**18), r"metadata.yaml duration is 1000000000000000000, but its MCAP file's summary says 2000000000"),
+        ("ground truth of the wrong type", wrong_type, r"recording topic /ground_truth/poses has the wrong message type in .*: found std_msgs/msg/String, expected tf2_msgs/msg/TFMessage \(simlan_data.recording.schema\); record it with simlan_data"),
+        ("clock of the wrong type", lambda b: wrong_type(b, schema.CLOCK), r"recording topic /clock has the wrong message type in .*: found std_msgs/msg/String, expected rosgraph_msgs/msg/Clock"),
+        ("replay --set of the wrong type", ("replay", ["--algorithms", "safety", "--set", "hold_s=abc"]), r"invalid hold_s='abc' in replay --set: expected float \(TreesConfig.hold_s\), got str; e.g. --set hold_s=1.0"),
+        ("replay --set bool for a float", ("replay", ["--algorithms", "safety", "--set", "hold_s=true"]), r"invalid hold_s=True in replay --set: expected float"),
+        ("replay --set of a nested key", ("replay", ["--algorithms", "safety", "--set", "ttc.enabled=3"]), r"invalid ttc.enabled=3 in replay --set: expected bool \(TreesConfig.ttc.enabled\), got int"),
     ]
 ]
 # fmt: on
@@ -423,6 +503,16 @@ def run_recording_case(case: Case, tmp: Path) -> None:
     bag = tmp / "recording"
     if case.arg == "topics":
         small_recording(bag, topics=(schema.CLOCK,))
+    elif isinstance(case.arg, tuple):  # ("replay", extra arguments): the replay CLI's checks
+        from simlan_data.apps.replay import main as replay
+
+        small_recording(bag)
+        out = tmp / "replay_out"
+        try:
+            replay([str(bag), "--out", str(out), *case.arg[1]])
+        finally:
+            assert not out.exists(), "rejected input left --out behind"
+        return
     else:
         small_recording(bag)
         assert callable(case.arg)

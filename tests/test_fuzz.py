@@ -21,8 +21,10 @@ from fuzz_targets import (
     calibration_inputs,
     check_calibration,
     check_config,
+    check_hostile,
     check_recording,
     config_overrides,
+    hostile_inputs,
     recording_inputs,
 )
 from hypothesis import HealthCheck, given, settings
@@ -74,8 +76,18 @@ def test_fuzz_recording_reader_and_recovery(bag_files: dict[str, bytes]) -> None
     assert any(k.startswith("RecordingInputError") for k in outcomes), outcomes
 
 
+def test_fuzz_hostile_inputs() -> None:
+    """Issue 21's shapes (FIFOs and directories for files, alias bombs, oversized metadata.yaml,
+    counts that disagree with the MCAP file, topics of the wrong type, ``--set`` values of the
+    wrong type): every one a one-line exit-2 error within 5 s, nothing left behind."""
+    outcomes = _fuzz(hostile_inputs(), check_hostile, max(EXAMPLES // 2, 20), 5000)
+    assert set(outcomes) <= {"RecordingInputError", "ConfigError"}, outcomes
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize(("target", "share"), [("calibration", 1), ("config", 4), ("recording", 1)])
+@pytest.mark.parametrize(
+    ("target", "share"), [("calibration", 1), ("config", 4), ("recording", 1), ("hostile", 4)]
+)
 def test_fuzz_large_budget_with_heap_checks(target: str, share: int) -> None:
     """The large budget, in a process with glibc's heap checks on (MALLOC_CHECK_=3)."""
     proc = subprocess.run(
