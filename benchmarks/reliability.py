@@ -171,8 +171,10 @@ def fuzz(examples: int) -> dict[str, dict[str, object]]:
         calibration_inputs,
         check_calibration,
         check_config,
+        check_hostile,
         check_recording,
         config_overrides,
+        hostile_inputs,
         recording_inputs,
     )
     from reliability_cases import small_recording
@@ -195,6 +197,11 @@ def fuzz(examples: int) -> dict[str, dict[str, object]]:
             recording_inputs(files),
             check_recording,
             examples,
+        ),
+        "hostile inputs (FIFOs, alias bombs, inflated counts, wrong types, --set values)": (
+            hostile_inputs(),
+            check_hostile,
+            max(1, examples // 4),
         ),
     }
     out: dict[str, dict[str, object]] = {}

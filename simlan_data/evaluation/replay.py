@@ -23,8 +23,11 @@ from simlan_data.config.faults import CameraFaults
 from simlan_data.errors import ConfigError, RecordingInputError
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import schema
+from simlan_data.recording.bounded import load_yaml_without_aliases
 from simlan_data.recording.cameras import cameras_in_recording
 from simlan_data.recording.reader import RecordingReader
+
+MAX_CONFIG_CHARS = 1 << 20  # a recorded config is a few KiB
 
 
 @dataclass
@@ -46,7 +49,18 @@ class ReplayContext:
                 "the run's config is unknown",
                 "record with simlan_data",
             )
-        return yaml.safe_load(msg.msg.data)
+        text = str(msg.msg.data)
+        where = f"{self.reader.path} /simlan/config"
+        if len(text) > MAX_CONFIG_CHARS:
+            raise RecordingInputError(
+                "recorded config too large", where, f"{len(text)} characters", "record with simlan_data"
+            )
+        try:
+            return load_yaml_without_aliases(text)  # (an alias bomb must not hang a replay)
+        except yaml.YAMLError as err:
+            raise RecordingInputError(
+                "recorded config unreadable", where, str(err).splitlines()[0], "record with simlan_data"
+            ) from None
 
     @cached_property
     def cameras(self) -> dict[str, CameraModel]:

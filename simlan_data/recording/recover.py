@@ -28,15 +28,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from mcap.records import Channel, Message, Schema
 
 from simlan_data.constants import DAMAGED_SUFFIX, NS_PER_S, RECORDING_DIRNAME
 from simlan_data.errors import RecordingError, RecordingInputError
 from simlan_data.recording import losses as L
 from simlan_data.recording import schema
-from simlan_data.recording.bounded import require_regular
-from simlan_data.recording.reader import METADATA_KEY_FORMAT, RecordingReader
+from simlan_data.recording.bounded import load_yaml_without_aliases, require_regular
+from simlan_data.recording.reader import MAX_METADATA_BYTES, METADATA_KEY_FORMAT, RecordingReader
 from simlan_data.recording.run_marker import RunMarker, mark_incomplete, read_running, writer_alive
 from simlan_data.recording.salvage import Salvage, scan
 from simlan_data.recording.writer import RecordingWriter
@@ -253,9 +252,10 @@ def resolve_bag(path: Path | str) -> Path:
 def _custom_data(bag: Path, salvage: Salvage) -> dict[str, str]:
     data: dict[str, str] = {}
     meta = bag / "metadata.yaml"
-    if meta.is_file():
+    if meta.is_file() and meta.stat().st_size <= MAX_METADATA_BYTES:
         with contextlib.suppress(Exception):
-            old = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"].get("custom_data") or {}
+            text = meta.read_text()
+            old = load_yaml_without_aliases(text)["rosbag2_bagfile_information"].get("custom_data") or {}
             data.update({str(k): str(v) for k, v in old.items()})
     info = salvage.run_info
     if info is not None and METADATA_KEY_FORMAT not in data:

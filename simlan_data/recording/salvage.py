@@ -44,7 +44,7 @@ else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
 
 from simlan_data.errors import RecordingInputError
 from simlan_data.recording import schema
-from simlan_data.recording.bounded import require_regular
+from simlan_data.recording.bounded import load_yaml_without_aliases, require_regular
 from simlan_data.recording.losses import ALL_TOPICS, Loss
 
 MAX_CHUNK_BYTES = (
@@ -583,5 +583,5 @@ def _provenance(out: Salvage, topic: str, msgtype: str, data: bytes, store: Any)
         out.run_info = msg
     else:
         with contextlib.suppress(yaml.YAMLError, AttributeError):
-            cfg = yaml.safe_load(msg.data)
+            cfg = load_yaml_without_aliases(msg.data)  # (an alias bomb must not hang recover)
             out.config = cfg if isinstance(cfg, dict) else {}
