@@ -294,3 +294,61 @@ def test_repeated_default_runs_side_by_side_are_byte_identical(tmp_path: Path) -
     escape with probability (5/6)^11 = 13 %; benchmarks/determinism.py runs 100)."""
     digests = _side_by_side_runs(tmp_path, PAIRS_SLOW)
     assert all(d == digests[0] for d in digests), digests
+
+
+# ----------------------------------------------------------- the deflate of the PNG encoders
+# ISA-L's level-1/2 deflate body (igzip_icf_body_h1_gr_bt.asm, .write_first_byte) hashes input
+# position 2 of a new stream from a register that still holds the address of the compressor's
+# state, not the data: whether that position gets a match depended on where malloc (or the
+# thread's stack) put the compressor, so about 1 run in 50 wrote other deflate bytes for the same
+# pixels (issue 21). An image whose first row is one value v puts "2 (the filter byte), v, v, v"
+# at the start of the deflate input: position 2 then matches position 1 only when the address
+# hashes to the bucket of "vvvv". 256 values of v cover 1/32 of the buckets; each pass moves the
+# compressor to another address (heap) or stack (thread), so an encoder whose bytes depend on the
+# address fails here with probability above 1 - (31/32)^120 = 98 % for each path.
+
+
+def _runs_of_one_value() -> list[np.ndarray]:
+    return [np.full((4, 300), v, dtype=np.uint8) for v in range(256) if v != 2]
+
+
+def test_png_bytes_do_not_depend_on_where_the_compressor_lives() -> None:
+    from isal import isal_zlib
+
+    from simlan_data.recording.codecs import PNG_LEVEL
+    from simlan_data.recording.incremental import BandedPng
+
+    images = _runs_of_one_value()
+    seen: list[set[bytes]] = [set() for _ in images]
+    keep = []
+    for _ in range(120):
+        keep.append(isal_zlib.compressobj(PNG_LEVEL, isal_zlib.DEFLATED, -15))  # the next one lands elsewhere
+        for i, image in enumerate(images):
+            seen[i].add(BandedPng().encode(image))
+    varying = [i for i, s in enumerate(seen) if len(s) > 1]
+    assert not varying, f"{len(varying)} images got more than one encoding (first: value {varying[0]})"
+
+
+def test_one_shot_png_bytes_do_not_depend_on_the_thread_stack() -> None:
+    import threading
+
+    from simlan_data.recording.codecs import encode_png
+
+    images = _runs_of_one_value()
+    seen: list[set[bytes]] = [set() for _ in images]
+
+    def encode_all() -> None:
+        for i, image in enumerate(images):
+            seen[i].add(encode_png(image))
+
+    old = threading.stack_size()
+    try:
+        for k in range(120):  # each thread's stack ends in another 64 KiB block
+            threading.stack_size((1 << 20) + k * (64 << 10) + 4096 * (k % 16))
+            t = threading.Thread(target=encode_all)
+            t.start()
+            t.join()
+    finally:
+        threading.stack_size(old)
+    varying = [i for i, s in enumerate(seen) if len(s) > 1]
+    assert not varying, f"{len(varying)} images got more than one encoding (first: value {varying[0]})"

@@ -31,7 +31,13 @@ DEPTH_HEADER = struct.Struct("<iff")  # compressionFormat (INV_DEPTH = 0), depth
 # Storing PNGs uncompressed and leaving compression to the bag's zstd chunks is smaller but makes
 # every unchanged frame cost compression again: slower overall in a run.
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-PNG_LEVEL = 1  # ISA-L's levels are 0-3; 1 is as small as 2 here and 3 is slower and no smaller
+# ISA-L's level 3, not 1 or 2: their x86 deflate body (igzip_icf_body_h1_gr_bt.asm,
+# .write_first_byte) hashes input position 2 of every new stream from a register that still holds
+# the address of the compressor's state instead of the data, so the bytes (not the pixels) of about
+# 1 run in 50 depended on where malloc or a thread's stack put the compressor (ASLR; issue 21,
+# tests/test_determinism.py). Level 3 runs ISA-L's C body (icf_body_hash1_fillgreedy_lazy): 3.5 ms
+# instead of 2.1 ms per 960x540 depth frame, 3 % larger (BENCHMARKS.md, "Determinism (issue 21)").
+PNG_LEVEL = 3
 PNG_FILTER_UP = 2
 
 
