@@ -244,6 +244,7 @@ HOSTILE_KINDS = (
     "count inflated",
     "wrong type",
     "set of the wrong type",
+    "config alias bomb",
 )
 TRUE_COUNTS = {
     "message_count": 245,
@@ -279,6 +280,10 @@ def hostile_inputs(draw: st.DrawFn) -> tuple[str, tuple]:
     if kind == "alias bomb":
         width, depth = draw(st.integers(2, 12)), draw(st.integers(1, 12))
         return kind, (width, depth, draw(st.booleans()))
+    if kind == "config alias bomb":  # one that expands past the config loader's 100k values
+        width = draw(st.integers(2, 12))
+        shallowest = next(d for d in range(1, 40) if width ** (d + 1) > 100_000)
+        return kind, (width, draw(st.integers(shallowest, shallowest + 8)), draw(st.booleans()))
     if kind == "metadata too large":
         return kind, (draw(st.integers((256 << 10) + 1, 8 << 20)),)
     if kind == "count inflated":
@@ -338,9 +343,21 @@ def check_hostile(case: tuple[str, tuple]) -> str:
             _inflate(bag, *params)
         elif kind == "wrong type":
             wrong_type(bag, *params)
+        elif kind == "config alias bomb":  # a --config-dir file (agents/NAME.yaml) the run would compose
+            width, depth, nested = params
+            agents = Path(tmp) / "conf" / "agents"
+            agents.mkdir(parents=True)
+            (agents / "bomb.yaml").write_text(
+                ("deep:\n  " if nested else "")
+                + _bomb(width, depth).replace("\n", "\n  " if nested else "\n")
+            )
         t0 = time.perf_counter()
         try:
-            if kind == "set of the wrong type":
+            if kind == "config alias bomb":
+                from simlan_data.config.safe_yaml import check_config_dirs
+
+                check_config_dirs(["--config-dir", str(Path(tmp) / "conf"), "agents=bomb"])
+            elif kind == "set of the wrong type":
                 key, raw = params
                 replay([str(bag), "--out", str(out), "--algorithms", "safety", "--set", f"{key}={raw}"])
             else:
