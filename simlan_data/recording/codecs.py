@@ -24,8 +24,9 @@ DEPTH_FORMAT = "16UC1; compressedDepth png"
 LABELS_FORMAT = "mono8; png compressed mono8"
 DEPTH_HEADER = struct.Struct("<iff")  # compressionFormat (INV_DEPTH = 0), depthParam[2]
 # PNGs are written here, not by OpenCV: libpng deflates with zlib, whose level 1 spends 8 ms on a
-# 960x540 16-bit depth frame; ISA-L's level 1 (python-isal) gives the same size in 1.9 ms (the
-# whole encode: depth 3.7x, labels 12x faster; BENCHMARKS.md, benchmarks/spine.py). The container is
+# 960x540 16-bit depth frame; ISA-L's level 1 (python-isal) gave the same size in 1.9 ms (the
+# whole encode: depth 3.7x, labels 12x faster; BENCHMARKS.md, benchmarks/spine.py), its level 3
+# (PNG_LEVEL below, for determinism) takes 3.5 ms, 3 % larger. The container is
 # the PNG standard's minimum (IHDR, one IDAT, IEND), every row with the "up" filter: the fastest
 # filter at no cost in size on these images (adaptive filters: 14.4 ms against 11.4 ms in libpng).
 # Storing PNGs uncompressed and leaving compression to the bag's zstd chunks is smaller but makes
