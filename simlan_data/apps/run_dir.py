@@ -103,9 +103,7 @@ def claim(run_dir: Path) -> RunDirLock:
     return RunDirLock(run_dir, fd)
 
 
-def write_provenance(
-    run_dir: Path, task_cfg: DictConfig, hydra_cfg: DictConfig, overrides: list[str]
-) -> None:
+def write_provenance(run_dir: Path, task_cfg: DictConfig, hydra_cfg: Any, overrides: list[str]) -> None:
     """``.hydra/config.yaml``, ``hydra.yaml`` and ``overrides.yaml``, the files Hydra would have
     written (the sweep aggregator and ``--experimental-rerun`` read them)."""
     out = run_dir / HYDRA_DIRNAME
