@@ -144,7 +144,7 @@ def _registered() -> dict[tuple[str, str], AlgorithmSpec]:
         prefix, name = _split(ep.name)
         if role in ROLES and isinstance(cls, type) and prefix in (None, role):
             config_class = getattr(cls, "config_class", None)
-            if config_class is not None and dataclasses.is_dataclass(config_class):
+            if isinstance(config_class, type) and dataclasses.is_dataclass(config_class):
                 out[(role, name)] = AlgorithmSpec(role, name, cls, config_class, _origin(ep))
     return out
 
@@ -256,7 +256,8 @@ class Guarded:
     """
 
     def __init__(self, inner: Any, spec: AlgorithmSpec) -> None:
-        self._inner, self._spec, self._t_ns = inner, spec, None
+        self._inner, self._spec = inner, spec
+        self._t_ns: int | None = None
 
     def at(self, t_ns: int) -> Guarded:
         """Tell the guard the simulated time of the next call (for methods that take no time,

@@ -54,12 +54,14 @@ class CameraFrame:
     @cached_property
     def bgr(self) -> NDArray[np.uint8]:
         """The image, decoded by OpenCV (HxWx3 BGR)."""
-        return cv2.imdecode(np.frombuffer(self.jpeg, np.uint8), cv2.IMREAD_COLOR)
+        return np.asarray(cv2.imdecode(np.frombuffer(self.jpeg, np.uint8), cv2.IMREAD_COLOR), dtype=np.uint8)
 
     @cached_property
     def gray(self) -> NDArray[np.uint8]:
         """The image in grey levels (what marker detectors read)."""
-        return cv2.imdecode(np.frombuffer(self.jpeg, np.uint8), cv2.IMREAD_GRAYSCALE)
+        return np.asarray(
+            cv2.imdecode(np.frombuffer(self.jpeg, np.uint8), cv2.IMREAD_GRAYSCALE), dtype=np.uint8
+        )
 
 
 @dataclass(frozen=True)
@@ -149,7 +151,8 @@ class SearchingLocalizer(Protocol):
 def searches(localizer: object) -> bool:
     """True if ``localizer`` implements the optional searching protocol."""
     return all(
-        callable(getattr(localizer, n, None)) for n in ("search_plans", "detect", "observe_search", "close_frame")
+        callable(getattr(localizer, n, None))
+        for n in ("search_plans", "detect", "observe_search", "close_frame")
     )
 
 
@@ -218,4 +221,3 @@ def missing_methods(role: str, cls: type) -> list[str]:
     proto = PROTOCOLS[role]
     wanted = [n for n in vars(proto) if not n.startswith("_") and callable(getattr(proto, n, None))]
     return [n for n in wanted if not callable(getattr(cls, n, None))]
-

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from omegaconf import OmegaConf
 
 from simlan_data.algorithms import registry
-from simlan_data.algorithms.birdseye import BirdseyeStitcher, CanvasSpec
+from simlan_data.algorithms.birdseye import CanvasSpec
 from simlan_data.algorithms.birdseye_simlan import SimlanBirdseye
 from simlan_data.algorithms.birdseye_stitcher import GpssStitcher
 from simlan_data.algorithms.roles import StitcherContext
@@ -181,7 +181,7 @@ def _score(
     ctx: ReplayContext,
     spec: CanvasSpec,
     cameras: list[Any],
-    views: BirdseyeStitcher | CameraViews,
+    views: Any,  # the stitcher (maybe a guarded plug-in) or its CameraViews: .coverage, the floor masks
     evaluated: list[tuple[list[NDArray[np.uint8]], list[NDArray[np.uint8]], NDArray[np.uint8]]],
     metrics: dict[str, float],
 ) -> tuple[dict[str, dict[str, float]], NDArray[np.uint8]]:
