@@ -204,6 +204,15 @@ def recording_inputs(bag: dict[str, bytes]) -> st.SearchStrategy[dict[str, bytes
     )
 
 
+def read_as_a_replay_does(bag: Path) -> None:
+    """Open ``bag``, require the topics, summarize it and read every message."""
+    with RecordingReader(bag) as reader:
+        reader.require_topics(schema.REQUIRED_TOPICS)
+        reader.summary()
+        for _ in reader.messages():
+            pass
+
+
 def check_recording(files: dict[str, bytes]) -> str:
     """Open, validate and read every message; then recover a copy and read the result back."""
     with tempfile.TemporaryDirectory(prefix="fuzz_bag_") as tmp:
@@ -215,11 +224,7 @@ def check_recording(files: dict[str, bytes]) -> str:
         shutil.copytree(bag, copy)
         outcome = "ok"
         try:
-            with RecordingReader(bag) as reader:
-                reader.require_topics(schema.REQUIRED_TOPICS)
-                reader.summary()
-                for _ in reader.messages():
-                    pass
+            read_as_a_replay_does(bag)
         except SimlanError as err:
             outcome = clear(err)
         try:
@@ -361,11 +366,7 @@ def check_hostile(case: tuple[str, tuple]) -> str:
                 key, raw = params
                 replay([str(bag), "--out", str(out), "--algorithms", "safety", "--set", f"{key}={raw}"])
             else:
-                with RecordingReader(bag) as reader:
-                    reader.require_topics(schema.REQUIRED_TOPICS)
-                    reader.summary()
-                    for _ in reader.messages():
-                        pass
+                read_as_a_replay_does(bag)
         except SimlanError as err:
             error: SimlanError | None = err
         else:

@@ -327,6 +327,19 @@ def real_layout_loads() -> int:
 
 
 # -------------------------------------------------------------------------------- recordings
+def run_info_for_tests(scenario: str, format_version: str = "1.0") -> object:
+    """A ``/simlan/run_info`` message for recordings written by tests."""
+    return M.run_info(
+        format_version=format_version,
+        version="test",
+        scenario=scenario,
+        seed=0,
+        renderer="none",
+        renderer_info="",
+        dependencies={},
+    )
+
+
 def small_recording(
     path: Path, *, format_version: str = "1.0", topics: tuple[str, ...] | None = None
 ) -> Path:
@@ -338,16 +351,7 @@ def small_recording(
         if schema.CONFIG in wanted:
             w.write(by_name[schema.CONFIG], 0, M.string(yaml.safe_dump({"duration_s": 2.0})))
         if schema.RUN_INFO in wanted:
-            info = M.run_info(
-                format_version=format_version,
-                version="test",
-                scenario="small",
-                seed=0,
-                renderer="none",
-                renderer_info="",
-                dependencies={},
-            )
-            w.write(by_name[schema.RUN_INFO], 0, info)
+            w.write(by_name[schema.RUN_INFO], 0, run_info_for_tests("small", format_version))
         if schema.TF_STATIC in wanted:
             w.write(by_name[schema.TF_STATIC], 0, M.tf_message([]))
         for k in range(121):

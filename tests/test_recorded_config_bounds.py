@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from reliability_cases import run_info_for_tests
 from reliability_helpers import mcap_file
 
 from conftest import run_cli
@@ -25,11 +26,7 @@ def _recording(path: Path) -> Path:
     with RecordingWriter(path, flush_period_ns=NS_PER_S // 2) as w:
         w.set_metadata("simlan.format_version", "1.0")
         w.write(by_name[schema.CONFIG], 0, M.string(BOMB))
-        info = M.run_info(
-            format_version="1.0", version="test", scenario="bomb", seed=0, renderer="none",
-            renderer_info="", dependencies={},
-        )  # fmt: skip
-        w.write(by_name[schema.RUN_INFO], 0, info)
+        w.write(by_name[schema.RUN_INFO], 0, run_info_for_tests("bomb"))
         w.write(by_name[schema.TF_STATIC], 0, M.tf_message([]))
         for k in range(121):
             t = k * NS_PER_S // 60

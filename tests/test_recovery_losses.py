@@ -32,6 +32,7 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, DataEnd, MessageIndex
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
+from reliability_cases import run_info_for_tests
 
 from conftest import run_cli
 from simlan_data.constants import FORMAT_VERSION, NS_PER_S
@@ -55,16 +56,7 @@ def _record(run_dir: Path, compression: str = "zstd") -> Path:
     with RecordingWriter(run_dir / "recording", compression=compression, flush_period_ns=NS_PER_S // 2) as w:
         w.set_metadata("simlan.format_version", FORMAT_VERSION)
         w.write(TOPICS[schema.CONFIG], 0, M.string(yaml.safe_dump({"duration_s": float(SECONDS)})))
-        info = M.run_info(
-            format_version=FORMAT_VERSION,
-            version="test",
-            scenario="losses",
-            seed=0,
-            renderer="none",
-            renderer_info="",
-            dependencies={},
-        )
-        w.write(TOPICS[schema.RUN_INFO], 0, info)
+        w.write(TOPICS[schema.RUN_INFO], 0, run_info_for_tests("losses", FORMAT_VERSION))
         for k in range(SECONDS * 100 + 1):
             t = k * NS_PER_S // 100
             w.write(TOPICS[schema.CLOCK], t, M.clock(t))
