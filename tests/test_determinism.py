@@ -282,6 +282,7 @@ def _side_by_side_runs(root: Path, pairs: int) -> list[dict[str, str]]:
     return digests
 
 
+@pytest.mark.slow  # (10 s; the default suite keeps the address tests below, the regression tests)
 def test_two_default_runs_side_by_side_are_byte_identical(tmp_path: Path) -> None:
     """Two short default runs (all cameras and streams) started at once: the same file bytes."""
     digests = _side_by_side_runs(tmp_path, PAIRS_FAST)
