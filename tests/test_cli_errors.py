@@ -11,7 +11,7 @@ import pytest
 from conftest import compose_config, run_cli
 from simlan_data.config.schema import AgentConfig
 from simlan_data.config.validation import to_config
-from simlan_data.constants import CALIBRATION_DIR
+from simlan_data.constants import CALIBRATION_DIR, CONF_DIR
 from simlan_data.errors import ConfigError
 from simlan_data.sim.scene import load_inputs
 
@@ -123,6 +123,15 @@ def test_existing_recording_is_never_touched(tmp_path: Path) -> None:
     assert "run directory not empty" in _one_error_line(proc.stderr)  # (an earlier run: never written into)
     assert hashlib.sha256((bag / "metadata.yaml").read_bytes()).hexdigest() == digest
     assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml"]
+
+
+def test_fast_help_is_hydras_help_word_for_word() -> None:
+    """``--help`` is composed once by simlan_data.apps.help; with a config directory on the
+    command line Hydra renders its own: the two texts must be the same."""
+    ours = run_cli("--help", "duration_s=7")
+    hydras = run_cli("--help", "duration_s=7", "--config-dir", str(CONF_DIR))
+    assert ours.returncode == hydras.returncode == 0, (ours.stderr, hydras.stderr)
+    assert ours.stdout == hydras.stdout and "duration_s: 7.0" in ours.stdout
 
 
 def test_help_lists_groups_and_keys() -> None:

@@ -12,35 +12,34 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import cv2
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from simlan_data.apps import run_dir as run_dirs
 from simlan_data.apps import signals
 from simlan_data.apps.cli import run_cli
+from simlan_data.apps.help import print_help, wants_fast_help
 from simlan_data.config.schema import Config, register_configs
 from simlan_data.config.validation import to_config
 from simlan_data.constants import CONF_DIR, METRICS_FILENAME, RECORDING_DIRNAME, RUNNING_MARKER
 from simlan_data.errors import ConfigError, PluginError, RunError, SimlanError
-from simlan_data.evaluation.localization_replay import recording_metrics
-from simlan_data.evaluation.replay import ReplayContext
-from simlan_data.evaluation.report import write_report
-from simlan_data.evaluation.safety_metrics import recording_safety_metrics
 from simlan_data.metrics_io import write_metrics
-from simlan_data.recording.reader import RecordingReader
 from simlan_data.recording.run_marker import RunMarker, write_running
-from simlan_data.sim.scene import load_inputs
-from simlan_data.sim.simulation import RunStats, Simulation
+
+if TYPE_CHECKING:
+    from simlan_data.sim.simulation import RunStats
+
+# The simulator, the recorder's reader, OpenCV and the evaluation are imported where a run needs
+# them, not here: `--help` and a config error then answer without loading them (issue 22).
 
 log = logging.getLogger("simlan_data.run")
 
@@ -62,6 +61,11 @@ def execute(
         ConfigError: bad inputs (before anything is written).
         RunError: the run failed.
     """
+    from tqdm import tqdm
+
+    from simlan_data.sim.scene import load_inputs
+    from simlan_data.sim.simulation import Simulation
+
     inputs = load_inputs(cfg)
     bag = run_dir / RECORDING_DIRNAME
     if bag.exists():
@@ -117,12 +121,20 @@ def execute(
     finally:
         bar.close()
     metrics = stats.metrics()
+    import cv2
+
     metrics["job.opencv_threads"] = float(cv2.getNumThreads())
     metrics["job.encode_threads"] = float(cfg.recording.encode_threads)
     metrics["job.gl_threads"] = float(os.environ.get("LP_NUM_THREADS", "-1") or -1)  # -1: Mesa's default
     metrics["run.stopped_early"] = float(stats.stopped_early)
     marker.unlink()  # the recording is finished: a failure from here on (a full disk) needs no recovery
     if cfg.recording.enabled:
+        from simlan_data.evaluation.localization_replay import recording_metrics
+        from simlan_data.evaluation.replay import ReplayContext
+        from simlan_data.evaluation.report import write_report
+        from simlan_data.evaluation.safety_metrics import recording_safety_metrics
+        from simlan_data.recording.reader import RecordingReader
+
         with RecordingReader(bag) as reader:
             ctx = ReplayContext(reader, run_dir)
             metrics.update(recording_metrics(reader, ctx.config, ctx.cameras))
@@ -197,6 +209,8 @@ def limit_threads(cores: int) -> None:
     Mesa's rasterizer and the image encoding on its own thread.
     """
     if cores > 0:
+        import cv2
+
         cv2.setNumThreads(cores)
 
 
@@ -300,6 +314,8 @@ def run_until_signal(cfg: Config, run_dir: Path, config_yaml: str) -> float | No
 
 
 def _registered_app() -> Any:
+    if wants_fast_help(sys.argv[1:]):  # Hydra's own --help takes 2 s to list the groups
+        return print_help(sys.argv[1:])
     register_configs()  # the schema and every algorithm (plug-ins load here: their errors are one line)
     return _app()
 

@@ -5,11 +5,22 @@ Quaternions are (x, y, z, w) like ROS and scipy. Rodrigues vectors are axis * an
 
 from __future__ import annotations
 
+from functools import cache
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
+
+
+@cache
+def _rotation() -> Any:
+    """scipy's ``Rotation``, imported on first use: scipy.spatial takes 0.2 s to import, and the
+    command line's help and config errors import this module without rotating anything."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
 
 
 def matrix_from_quat(quat_xyzw: ArrayLike) -> FloatArray:
@@ -20,7 +31,7 @@ def matrix_from_quat(quat_xyzw: ArrayLike) -> FloatArray:
     """
     q = np.asarray(quat_xyzw, dtype=float)
     if q.shape != (4,):
-        return Rotation.from_quat(q).as_matrix()
+        return _rotation().from_quat(q).as_matrix()
     x, y, z, w = q / np.sqrt(q @ q)
     return np.array(
         [
@@ -33,28 +44,28 @@ def matrix_from_quat(quat_xyzw: ArrayLike) -> FloatArray:
 
 def quat_from_matrix(matrix: ArrayLike) -> FloatArray:
     """Return the quaternion (x, y, z, w) of a rotation matrix, with w >= 0."""
-    quat = Rotation.from_matrix(np.asarray(matrix, dtype=float)).as_quat()
+    quat = _rotation().from_matrix(np.asarray(matrix, dtype=float)).as_quat()
     return np.where(quat[..., 3:4] < 0, -quat, quat)
 
 
 def matrix_from_rodrigues(rotvec: ArrayLike) -> FloatArray:
     """Return the rotation matrix of a Rodrigues (axis-angle) vector, as cv2.Rodrigues does."""
-    return Rotation.from_rotvec(np.asarray(rotvec, dtype=float).reshape(-1, 3)).as_matrix().squeeze()
+    return _rotation().from_rotvec(np.asarray(rotvec, dtype=float).reshape(-1, 3)).as_matrix().squeeze()
 
 
 def rodrigues_from_matrix(matrix: ArrayLike) -> FloatArray:
     """Return the Rodrigues vector of a rotation matrix."""
-    return Rotation.from_matrix(np.asarray(matrix, dtype=float)).as_rotvec()
+    return _rotation().from_matrix(np.asarray(matrix, dtype=float)).as_rotvec()
 
 
 def quat_from_rpy(roll_rad: float, pitch_rad: float, yaw_rad: float) -> FloatArray:
     """Return the quaternion of extrinsic roll-pitch-yaw (URDF/SDF convention: R = Rz Ry Rx)."""
-    return Rotation.from_euler("xyz", [roll_rad, pitch_rad, yaw_rad]).as_quat()
+    return _rotation().from_euler("xyz", [roll_rad, pitch_rad, yaw_rad]).as_quat()
 
 
 def rpy_from_quat(quat_xyzw: ArrayLike) -> FloatArray:
     """Return extrinsic (roll, pitch, yaw) in radians of a quaternion."""
-    return Rotation.from_quat(np.asarray(quat_xyzw, dtype=float)).as_euler("xyz")
+    return _rotation().from_quat(np.asarray(quat_xyzw, dtype=float)).as_euler("xyz")
 
 
 def quat_from_yaw(yaw_rad: float) -> FloatArray:
