@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.errors import ConfigError
 from simlan_data.world.skeleton import LOWER, UPPER
 
 F32 = NDArray[np.float32]
@@ -113,6 +114,21 @@ class PoseMapper:
         (directory / "model.json").write_text(json.dumps(doc, indent=1) + "\n")
 
 
+def _torch() -> Any:
+    """torch, which only the MLP pose mapper needs: an optional install (``pip install -e
+    ".[posemap]"``), so the base install has no torch; without it one line says so."""
+    try:
+        import torch
+    except ImportError as err:
+        raise ConfigError(
+            "the pose-mapping models mlp and fusion need torch",
+            "this installation",
+            f"torch is not installed ({err})",
+            'install the pose-mapping extra: pip install -e ".[posemap]" (or train posemap.model=gbm)',
+        ) from None
+    return torch
+
+
 def _mae_rad(y_pred: F64, y: F64) -> float:
     return float(np.abs(y_pred - y).mean())
 
@@ -121,7 +137,7 @@ class MLPMapper(PoseMapper):
     kind = "mlp"
 
     def _net(self, n_in: int, n_out: int) -> Any:
-        import torch
+        torch = _torch()
 
         layers: list[torch.nn.Module] = []
         width = n_in
@@ -132,7 +148,7 @@ class MLPMapper(PoseMapper):
         return torch.nn.Sequential(*layers)
 
     def fit(self, x: F32, y: F64, x_val: F32, y_val: F64, *, progress: bool = False) -> None:
-        import torch
+        torch = _torch()
 
         p = self.params
         torch.manual_seed(p.seed)
@@ -184,7 +200,7 @@ class MLPMapper(PoseMapper):
         self.net.eval()
 
     def predict_from_tensor(self, xv: Any) -> F64:
-        import torch
+        torch = _torch()
 
         assert self.y_norm is not None
         self.net.eval()
@@ -193,19 +209,19 @@ class MLPMapper(PoseMapper):
         return np.clip(self.y_norm.invert(y), LOWER, UPPER)
 
     def _predict_normalised(self, x: F32) -> NDArray[Any]:
-        import torch
+        torch = _torch()
 
         self.net.eval()
         with torch.no_grad():
             return self.net(torch.from_numpy(x)).numpy()
 
     def _save_weights(self, directory: Path) -> None:
-        import torch
+        torch = _torch()
 
         torch.save(self.net.state_dict(), directory / "model.pt")
 
     def _load_weights(self, directory: Path, info: dict) -> None:
-        import torch
+        torch = _torch()
 
         n_in = len(info["x_norm"]["mean"])
         n_out = len(info["y_norm"]["mean"])
