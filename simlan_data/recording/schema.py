@@ -224,6 +224,12 @@ GLOBAL_TOPICS: tuple[Topic, ...] = (
 
 REQUIRED_TOPICS = (CLOCK, TF_STATIC, GROUND_TRUTH_POSES, CONFIG, RUN_INFO)
 
+# Published once at the start and meant for every subscriber, also one that comes later: recorded
+# with the QoS a ROS 2 latched publisher offers (transient local, reliable, keep last 1, as
+# tf2's StaticTransformBroadcaster), so that `ros2 bag play` replays them to late subscribers too.
+LATCHED_TOPICS = frozenset({TF_STATIC, CONFIG, RUN_INFO, SEMANTIC_LABELS, SAFETY_ZONES})
+ROS_DISTRO = "jazzy"  # the message definitions the bag embeds are Jazzy's (metadata.yaml ros_distro)
+
 
 def custom_msg_definitions(msg_dir: Path = MSG_DIR) -> dict[str, str]:
     """Return {msgtype: .msg text} of every custom type shipped with the package."""

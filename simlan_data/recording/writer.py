@@ -34,6 +34,7 @@ if sys.version_info >= (3, 14):
 else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
     from backports import zstd
 from isal import isal_zlib
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.errors import WriterError
@@ -49,7 +50,7 @@ from rosbags.rosbag2.storage_mcap import (
 
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import RecordingError
-from simlan_data.recording.schema import Topic, typestore
+from simlan_data.recording.schema import LATCHED_TOPICS, ROS_DISTRO, Topic, typestore
 
 MAX_PENDING = 256  # bound the messages (and frames) waiting for the file
 CHUNK_OPCODE, MESSAGE_INDEX_OPCODE = 0x06, 0x07
@@ -248,7 +249,7 @@ class RecordingWriter:
         """Declare a topic with its message definition as found in another bag (for recovery)."""
         if topic not in self._connections:
             self._connections[topic] = self._writer.add_connection(
-                topic, msgtype, msgdef=msgdef, rihs01=rihs01
+                topic, msgtype, msgdef=msgdef, rihs01=rihs01, offered_qos_profiles=offered_qos(topic)
             )
 
     def close(self) -> None:
@@ -265,6 +266,7 @@ class RecordingWriter:
                 "check free disk space",
             ) from self._io_error
         self._writer.close()
+        name_the_distro(self.path / "metadata.yaml")
 
     def abort(self) -> None:
         """Stop without finishing the file (recover() can rebuild its index later)."""
@@ -318,7 +320,9 @@ class RecordingWriter:
     def _write_serialized(self, topic: Topic, stamp_ns: int, data: bytes) -> None:
         conn = self._connections.get(topic.name)
         if conn is None:
-            conn = self._writer.add_connection(topic.name, topic.msgtype, typestore=self._store)
+            conn = self._writer.add_connection(
+                topic.name, topic.msgtype, typestore=self._store, offered_qos_profiles=offered_qos(topic.name)
+            )
             self._connections[topic.name] = conn
         self._writer.write(conn, stamp_ns, data)
         self.message_counts[topic.name] = self.message_counts.get(topic.name, 0) + 1
@@ -415,3 +419,36 @@ def _close_chunk_with_crc(storage: McapWriter) -> None:
     write_uint64(rec, len(raw))
     storage.chunks.append(rec)
     storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+
+
+_INFINITE = QosTime(9223372036, 854775807)  # how ROS 2 writes an infinite duration in metadata.yaml
+LATCHED_QOS = Qos(
+    QosHistory.KEEP_LAST,
+    1,
+    QosReliability.RELIABLE,
+    QosDurability.TRANSIENT_LOCAL,
+    _INFINITE,
+    _INFINITE,
+    QosLiveliness.AUTOMATIC,
+    _INFINITE,
+    False,
+)
+
+
+def offered_qos(topic: str) -> list[Qos]:
+    """The QoS recorded for ``topic``: a latched publisher's for the topics published once
+    (``schema.LATCHED_TOPICS``); none (the player's default: reliable, volatile) for the streams."""
+    return [LATCHED_QOS] if topic in LATCHED_TOPICS else []
+
+
+def name_the_distro(metadata: Path) -> None:
+    """rosbags writes ``ros_distro: rosbags``; the bag's message definitions are a ROS 2 distro's
+    (``schema.ROS_DISTRO``): say which (atomically: a reader sees the old or the new file)."""
+    if not metadata.is_file():
+        return
+    text = metadata.read_text()
+    named = text.replace("  ros_distro: rosbags\n", f"  ros_distro: {ROS_DISTRO}\n", 1)
+    if named != text:
+        tmp = metadata.with_name(f".{metadata.name}.tmp")
+        tmp.write_text(named)
+        os.replace(tmp, metadata)
