@@ -443,12 +443,13 @@ def offered_qos(topic: str) -> list[Qos]:
 
 def name_the_distro(metadata: Path) -> None:
     """rosbags writes ``ros_distro: rosbags``; the bag's message definitions are a ROS 2 distro's
-    (``schema.ROS_DISTRO``): say which (atomically: a reader sees the old or the new file)."""
+    (``schema.ROS_DISTRO``): say which. Rewritten in place, never larger than before (a copy
+    beside it would need free space the run may not have left: a full disk must not fail here)."""
     if not metadata.is_file():
         return
     text = metadata.read_text()
     named = text.replace("  ros_distro: rosbags\n", f"  ros_distro: {ROS_DISTRO}\n", 1)
-    if named != text:
-        tmp = metadata.with_name(f".{metadata.name}.tmp")
-        tmp.write_text(named)
-        os.replace(tmp, metadata)
+    if named != text and len(named.encode()) <= len(text.encode()):
+        with metadata.open("r+") as f:
+            f.write(named)
+            f.truncate()
