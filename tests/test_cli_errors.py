@@ -154,3 +154,22 @@ def test_config_checks_without_a_process() -> None:
         to_config(compose_config("recording.depth_rate_hz=2"))
     with pytest.raises(ConfigError, match=r"unknown camera id 777"):
         load_inputs(to_config(compose_config("cameras.ids=[777]")))
+
+
+def test_the_summary_notes_calibration_disagreements_of_the_users_files_only(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """The packaged calibrations' stale derived fields are known (docs/twin.md): no 'note' on
+    every run; a user's calibration directory with disagreements gets the line."""
+    from simlan_data.apps.run import print_summary
+    from simlan_data.sim.simulation import RunStats
+
+    metrics = {"recording.messages": 1.0, "sim.duration_s": 1.0, "sim.wall_s": 1.0, "sim.rtf": 1.0}
+    stats = RunStats(calibration_issues=["160.yaml: position disagrees with -R^T t by 0.010 m"])
+    print_summary(to_config(compose_config("duration_s=1")), stats, metrics, tmp_path)
+    assert "calibration fields disagree" not in capsys.readouterr().out
+    shutil.copytree(CALIBRATION_DIR, tmp_path / "mine")
+    print_summary(
+        to_config(compose_config(f"cameras.calibration_dir={tmp_path / 'mine'}")), stats, metrics, tmp_path
+    )
+    assert "1 calibration fields disagree with K, R, t (listed in report.md)" in capsys.readouterr().out

@@ -171,7 +171,9 @@ def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_d
         lines.append(
             f"  {ns:<14} {nav}{stats.collisions[ns]} collisions, {stats.distance_m.get(ns, 0.0):.1f} m driven{loc}"
         )
-    if stats.calibration_issues:
+    if (
+        stats.calibration_issues and cfg.cameras.calibration_dir
+    ):  # (the packaged files' are known: docs/twin.md)
         lines.append(
             f"  note           {len(stats.calibration_issues)} calibration fields disagree with K, R, t (listed in report.md)"
         )
