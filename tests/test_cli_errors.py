@@ -173,3 +173,17 @@ def test_the_summary_notes_calibration_disagreements_of_the_users_files_only(
         to_config(compose_config(f"cameras.calibration_dir={tmp_path / 'mine'}")), stats, metrics, tmp_path
     )
     assert "1 calibration fields disagree with K, R, t (listed in report.md)" in capsys.readouterr().out
+
+
+def test_the_seed_sweep_example_gives_different_runs() -> None:
+    """README: `-m seed=0,1,2 perturbation.spawn_xy_m=0.2` must sweep something (without a
+    perturbation the seed changes nothing: docs/running.md says so)."""
+    poses = {
+        seed: to_config(compose_config(f"seed={seed}", "perturbation.spawn_xy_m=0.2"))
+        .agents["robot_agent_1"]
+        .pose
+        for seed in (0, 1, 2)
+    }
+    assert len({tuple(p) for p in poses.values()}) == 3
+    plain = {tuple(to_config(compose_config(f"seed={seed}")).agents["robot_agent_1"].pose) for seed in (0, 1)}
+    assert len(plain) == 1
