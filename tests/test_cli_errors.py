@@ -187,3 +187,19 @@ def test_the_seed_sweep_example_gives_different_runs() -> None:
     assert len({tuple(p) for p in poses.values()}) == 3
     plain = {tuple(to_config(compose_config(f"seed={seed}")).agents["robot_agent_1"].pose) for seed in (0, 1)}
     assert len(plain) == 1
+
+
+def test_the_summary_says_when_no_camera_ever_saw_a_robot(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    from simlan_data.apps.run import print_summary
+    from simlan_data.sim.simulation import RunStats
+
+    metrics = {"recording.messages": 1.0, "sim.duration_s": 1.0, "sim.wall_s": 1.0, "sim.rtf": 1.0}
+    stats = RunStats(collisions={"robot_agent_1": 0})
+    cfg = to_config(compose_config("duration_s=1"))
+    print_summary(cfg, stats, metrics | {"localization.robot_agent_1.availability": 0.4}, tmp_path)
+    assert "never seen" not in capsys.readouterr().out
+    print_summary(cfg, stats, metrics | {"localization.robot_agent_1.availability": 0.0}, tmp_path)
+    notes = [ln for ln in capsys.readouterr().out.splitlines() if "never seen by a camera" in ln]
+    assert notes == [notes[0]] and "robot_agent_1" in notes[0]

@@ -171,9 +171,14 @@ def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_d
         lines.append(
             f"  {ns:<14} {nav}{stats.collisions[ns]} collisions, {stats.distance_m.get(ns, 0.0):.1f} m driven{loc}"
         )
-    if (
-        stats.calibration_issues and cfg.cameras.calibration_dir
-    ):  # (the packaged files' are known: docs/twin.md)
+    unseen = [ns for ns in sorted(stats.collisions) if metrics.get(f"localization.{ns}.availability") == 0.0]
+    if unseen:  # a camera-steered run whose robot no camera saw: its results mean little
+        lines.append(
+            f"  note           never seen by a camera: {', '.join(unseen)} (no marker detection in the whole "
+            "run; check cameras.ids against where the robot drives)"
+        )
+    # the packaged calibrations' stale derived fields are known (docs/twin.md): a user's files only
+    if stats.calibration_issues and cfg.cameras.calibration_dir:
         lines.append(
             f"  note           {len(stats.calibration_issues)} calibration fields disagree with K, R, t (listed in report.md)"
         )
