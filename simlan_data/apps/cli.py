@@ -165,9 +165,8 @@ def run_cli(
     except SystemExit:
         flush_stdout()
         raise
-    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM before a run handles it (apps.signals)
-        signum = int(getattr(err, "signum", signal.SIGINT))
-        fail(f"interrupted by {signal.Signals(signum).name}", 128 + signum)
+    except KeyboardInterrupt:  # Ctrl-C outside a run's graceful stop (SIGTERM: apps.signals)
+        fail("interrupted by SIGINT", 128 + signal.SIGINT)
     except BaseException as err:
         if isinstance(err, BrokenPipeError):
             flush_stdout(broken_pipe_seen=True)  # (stdout's reader gone: exit 141)

@@ -76,7 +76,7 @@ def help_text(overrides: Sequence[str]) -> str:
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("config", overrides=list(overrides), return_hydra_config=True)
     help_cfg = cfg.hydra.help
-    job = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])
+    job = OmegaConf.masked_copy(cfg, [str(k) for k in cfg if k != "hydra"])
     groups = "".join(f"{g}: {', '.join(options)}\n" for g, options in config_groups().items())
     return string.Template(str(help_cfg.template)).safe_substitute(
         APP_CONFIG_GROUPS=groups, CONFIG=OmegaConf.to_yaml(job), FLAGS_HELP="", HYDRA_CONFIG_GROUPS=""

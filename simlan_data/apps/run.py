@@ -329,7 +329,7 @@ def _registered_app() -> Any:
 
 def main() -> None:
     """The command line: the Hydra app, errors turned into one line and an exit code."""
-    signals.install_early_handlers()  # SIGTERM while the config is composed: one line, exit 143
+    signals.exit_on_early_signal()  # (simlan-run: the -m shims installed it already)
     run_cli(_registered_app, started=lambda: bool(_STARTED))
 
 

@@ -49,7 +49,6 @@ class RunDirTakenError(ConfigError):
 class RunDirLock:
     """An exclusive ``flock`` on a run directory; released when closed or when the process ends."""
 
-    path: Path
     fd: int
 
     def close(self) -> None:
@@ -79,11 +78,8 @@ def claim(run_dir: Path) -> RunDirLock:
         ConfigError: another process holds it, or it holds an earlier run (exit 2; nothing written).
     """
     run_dir.mkdir(parents=True, exist_ok=True)
-    fd = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
+    fd = _try_lock(run_dir)
+    if fd is None:
         raise RunDirTakenError(
             "run directory in use",
             str(run_dir),
@@ -100,7 +96,22 @@ def claim(run_dir: Path) -> RunDirLock:
             f"it holds {shown} (an earlier run's?)",
             "simlan_data never writes into an existing run directory; choose another hydra.run.dir",
         )
-    return RunDirLock(run_dir, fd)
+    return RunDirLock(fd)
+
+
+def _try_lock(run_dir: Path) -> int | None:
+    """An open descriptor of ``run_dir`` holding its exclusive ``flock``, or None when another
+    process holds it (or the directory cannot be opened)."""
+    try:
+        fd = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    return fd
 
 
 def write_provenance(run_dir: Path, task_cfg: DictConfig, hydra_cfg: Any, overrides: list[str]) -> None:
@@ -194,20 +205,9 @@ def clear_refused(run_dir: Path, lock: RunDirLock | None) -> None:
             else:
                 p.unlink(missing_ok=True)
         lock.close()
-    elif _locked(run_dir):
-        return  # another process has just claimed it (still empty): leave it
+    elif run_dir.is_dir():
+        fd = _try_lock(run_dir)
+        if fd is None:
+            return  # another process has just claimed it (still empty): leave it
+        os.close(fd)  # (releases the lock taken here)
     remove_made(run_dir)
-
-
-def _locked(run_dir: Path) -> bool:
-    try:
-        fd = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
-    except OSError:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
-    finally:
-        os.close(fd)  # (releases a lock taken here)
-    return False

@@ -41,14 +41,6 @@ class RunInterruptedError(RunError):
         super().__init__(what, where, why, fix)
 
 
-class InterruptedBeforeStart(KeyboardInterrupt):
-    """SIGTERM before the run began (while the config is composed): nothing was written."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal_name(signum))
-        self.signum = signum
-
-
 @dataclass
 class StopRequest:
     """Set by the first SIGTERM/SIGINT; the simulation polls it at every step boundary."""
@@ -73,13 +65,12 @@ class StopRequest:
         os._exit(exit_code(signum))
 
 
-def _raise_before_start(signum: int, _frame: FrameType | None) -> None:
-    raise InterruptedBeforeStart(signum)
-
-
 def exit_on_early_signal() -> None:
-    """While Python imports the app (seconds, before anything is written), SIGTERM ends the
-    process with one line and exit 143 at once (``python -m simlan_data.run``'s first step)."""
+    """Until a run installs :func:`graceful_stop` (while Python imports the app and Hydra composes
+    the config: nothing is written yet), SIGTERM ends the process at once with one line and exit
+    143 instead of killing it without a word. Called by the ``-m`` shims first, then by ``main``."""
+    if threading.current_thread() is not threading.main_thread():
+        return
 
     def leave(signum: int, _frame: FrameType | None) -> None:
         with suppress(OSError):
@@ -87,13 +78,6 @@ def exit_on_early_signal() -> None:
         os._exit(exit_code(signum))
 
     signal.signal(signal.SIGTERM, leave)
-
-
-def install_early_handlers() -> None:
-    """Until the run installs :func:`graceful_stop`, SIGTERM ends the command like Ctrl-C does
-    (one line, exit 143) instead of killing it without a word."""
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _raise_before_start)
 
 
 @contextmanager
