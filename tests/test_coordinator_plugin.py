@@ -9,6 +9,7 @@ is one line, exit 2.
 from __future__ import annotations
 
 import os
+import subprocess
 import textwrap
 from pathlib import Path
 
@@ -79,15 +80,22 @@ def env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     return {"PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
 
 
-def test_a_users_coordinator_steers_the_fleet(env: dict[str, str], tmp_path: Path) -> None:
-    run_dir = tmp_path / "hold"
-    proc = run_cli(
+def _run_hold_then_go(
+    env: dict[str, str], run_dir: Path, *, release_s: str
+) -> subprocess.CompletedProcess[str]:
+    """A run with the user's coordinator (an import path), its release time set on the command line."""
+    return run_cli(
         *ARGS,
         "algorithms/coordinator=hold_coordinator:HoldThenGo",
-        "algorithms.coordinator.release_s=2.0",
+        f"algorithms.coordinator.release_s={release_s}",
         f"hydra.run.dir={run_dir}",
         env=env,
     )
+
+
+def test_a_users_coordinator_steers_the_fleet(env: dict[str, str], tmp_path: Path) -> None:
+    run_dir = tmp_path / "hold"
+    proc = _run_hold_then_go(env, run_dir, release_s="2.0")
     assert proc.returncode == 0, proc.stderr
     speeds = _speeds(run_dir)
     assert len(speeds) == 4
@@ -111,13 +119,7 @@ def test_a_users_coordinator_steers_the_fleet(env: dict[str, str], tmp_path: Pat
 
 def test_a_value_the_coordinators_config_refuses_is_one_line(env: dict[str, str], tmp_path: Path) -> None:
     run_dir = tmp_path / "bad"
-    proc = run_cli(
-        *ARGS,
-        "algorithms/coordinator=hold_coordinator:HoldThenGo",
-        "algorithms.coordinator.release_s=-1",
-        f"hydra.run.dir={run_dir}",
-        env=env,
-    )
+    proc = _run_hold_then_go(env, run_dir, release_s="-1")
     assert proc.returncode == 2, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr

@@ -152,10 +152,29 @@ def _assert_reported(reported: tuple[str, dict[str, Any], str], expected: list[L
     assert sorted(x[19:] for x in lost.splitlines()) == sorted(map(_line, expected)), info
 
 
-def test_bad_crc_names_the_chunk_s_messages_per_topic(tmp_path: Path) -> None:
+def _recorded(tmp_path: Path, compression: str = "zstd") -> tuple[Path, Path, list[tuple[str, int]]]:
+    """A run directory with a fresh recording: (run, its MCAP file, the messages it holds)."""
     run = tmp_path / "run"
-    mcap = _record(run, compression="none")
-    reference = _messages(mcap)
+    mcap = _record(run, compression=compression)
+    return run, mcap, _messages(mcap)
+
+
+def _assert_tail_lost(
+    run: Path, mcap: Path, reference: list[tuple[str, int]]
+) -> tuple[str, dict[str, Any], str]:
+    """A file that lost its end: recover, then the loss is one range for all topics, from the last
+    message kept to where the clock got (SECONDS); returns what was reported."""
+    reported = _recover(run)
+    recovered = _messages(mcap)
+    lost = _expected(reference, recovered)
+    kept_until = max(t for _, t in recovered) / NS_PER_S
+    assert kept_until < min(e[1] for e in lost) and max(e[2] or 0 for e in lost) == SECONDS
+    _assert_reported(reported, [("*", kept_until, float(SECONDS), None)])
+    return reported
+
+
+def test_bad_crc_names_the_chunk_s_messages_per_topic(tmp_path: Path) -> None:
+    run, mcap, reference = _recorded(tmp_path, compression="none")
     start, end, chunk = _chunks(mcap)[5]
     data = bytearray(mcap.read_bytes())
     data[(start + end) // 2] ^= 0x40  # inside the chunk's (uncompressed) records
@@ -175,9 +194,7 @@ def test_bad_crc_names_the_chunk_s_messages_per_topic(tmp_path: Path) -> None:
 
 def test_bad_record_length_in_a_chunk_with_a_valid_crc(tmp_path: Path) -> None:
     """The finding: the rest of the chunk was dropped, '0 damaged chunks', 'lost 0.000 s'."""
-    run = tmp_path / "run"
-    mcap = _record(run, compression="none")
-    reference = _messages(mcap)
+    run, mcap, reference = _recorded(tmp_path, compression="none")
     start, _, chunk = _chunks(mcap)[4]
     data = bytearray(mcap.read_bytes())
     records_at = start + 9 + 8 + 8 + 8 + 4 + 4 + 8  # opcode, length; times, size, crc, "", records length
@@ -208,9 +225,7 @@ def test_bad_record_length_in_a_chunk_with_a_valid_crc(tmp_path: Path) -> None:
 
 
 def test_truncated_chunk_names_its_time_range_for_all_topics(tmp_path: Path) -> None:
-    run = tmp_path / "run"
-    mcap = _record(run)
-    reference = _messages(mcap)
+    run, mcap, reference = _recorded(tmp_path)
     start, end, chunk = _chunks(mcap)[6]
     reached_s = chunk.message_end_time / NS_PER_S  # the clock got to the end of that chunk
     _crashed(run, mcap, reached_s, mcap.read_bytes()[: (start + end) // 2])
@@ -225,35 +240,20 @@ def test_truncated_chunk_names_its_time_range_for_all_topics(tmp_path: Path) -> 
 
 
 def test_truncated_file_names_what_the_clock_reached_beyond_it(tmp_path: Path) -> None:
-    run = tmp_path / "run"
-    mcap = _record(run)
-    reference = _messages(mcap)
+    run, mcap, reference = _recorded(tmp_path)
     _, end, _ = _chunks(mcap)[7]
     _crashed(run, mcap, float(SECONDS), mcap.read_bytes()[: end + 20])  # inside the message index
-    reported = _recover(run)
-    recovered = _messages(mcap)
-    lost = _expected(reference, recovered)
-    kept_until = max(t for _, t in recovered) / NS_PER_S
-    assert kept_until < min(e[1] for e in lost) and max(e[2] or 0 for e in lost) == SECONDS
-    _assert_reported(reported, [("*", kept_until, float(SECONDS), None)])
+    reported = _assert_tail_lost(run, mcap, reference)
     assert f"20 bytes from byte {end} are unreadable" in reported[0]
 
 
 @pytest.mark.parametrize("garbage", ["zeros", "random"])
 def test_garbage_tail_is_named_with_the_time_it_may_have_held(tmp_path: Path, garbage: str) -> None:
-    run = tmp_path / "run"
-    mcap = _record(run)
-    reference = _messages(mcap)
+    run, mcap, reference = _recorded(tmp_path)
     records = _records(mcap)
     cut = next(a for a, _, r in records if isinstance(r, Chunk) and a > _chunks(mcap)[7][0])
     assert isinstance(records[[a for a, _, _ in records].index(cut) - 1][2], MessageIndex)
     tail = bytes(4096) if garbage == "zeros" else np.random.default_rng(5).bytes(4096)
     _crashed(run, mcap, float(SECONDS), mcap.read_bytes()[:cut] + tail)
-    reported = _recover(run)
-    recovered = _messages(mcap)
-    lost = _expected(reference, recovered)
-    kept_until = max(t for _, t in recovered) / NS_PER_S
-    assert kept_until < min(e[1] for e in lost) and max(e[2] or 0 for e in lost) == SECONDS
-    _assert_reported(reported, [("*", kept_until, float(SECONDS), None)])
-    out, marker, _ = reported
+    out, marker, _ = _assert_tail_lost(run, mcap, reference)
     assert f"4096 bytes from byte {cut} are unreadable" in out and marker["unreadable_bytes"] == 4096
