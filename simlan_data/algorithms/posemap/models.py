@@ -139,7 +139,7 @@ class MLPMapper(PoseMapper):
     def _net(self, n_in: int, n_out: int) -> Any:
         torch = _torch()
 
-        layers: list[torch.nn.Module] = []
+        layers: list[Any] = []  # torch.nn modules (torch is an optional install)
         width = n_in
         for h in self.params.hidden:
             layers += [torch.nn.Linear(width, h), torch.nn.ReLU(), torch.nn.Dropout(self.params.dropout)]
