@@ -66,7 +66,7 @@ CONFIG_CASES = [
         ("misspelt key", ["recording.flush_period=2"], r"unknown key recording.flush_period in config: RecordingConfig has no such key; did you mean recording.flush_period_s\?"),
         ("misspelt key forced with +", ["+recording.fsynk=true"], r"unknown key recording.fsynk in config: RecordingConfig has no such key; did you mean recording.fsync\?"),
         ("agent key forced with +", ["+agents.robot_agent_1.typ=jackal"], r"unknown key agents.robot_agent_1.typ in config: AgentConfig has no such key; did you mean agents.robot_agent_1.type\?"),
-        ("algorithm key forced with +", ["algorithms/localizer=centroid", "+algorithms.localizer.min_side=1"], r"unknown key algorithms.localizer.min_side in config: CentroidConfig has no such key; did you mean algorithms.localizer.min_side_px\?"),
+        ("algorithm key forced with +", ["+algorithms.localizer.min_side=1"], r"unknown key algorithms.localizer.min_side in config: LocalizerParams has no such key; did you mean algorithms.localizer.min_side_px\?"),
         ("flush period zero", ["recording.flush_period_s=0"], r"invalid recording.flush_period_s=0.0 in config: must be > 0"),
         ("flush period negative", ["recording.flush_period_s=-1"], r"invalid recording.flush_period_s=-1.0 in config: must be > 0"),
         ("unknown group option", ["cameras=gpsss"], r"unknown cameras=gpsss in config: no such option in conf/cameras/; did you mean gpss\? options: gpss, gpss_all"),
