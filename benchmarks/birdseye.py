@@ -6,7 +6,7 @@ Renders the default cameras (160-170, 960x540, distortion on) of the full wareho
 truck at a few poses, and an orthographic ground truth of the same canvas (x -8..34, y -10..10 m
 at 50 px/m). Stitches every frame with ours, ours with the distortion ignored (ablation) and
 SIMLAN's method; scores them with the replay's QualityEvaluator; times stitching; measures what
-the live topic costs a default run. Prints markdown for BENCHMARKS.md and raw numbers.
+the live topic costs a default run. Prints markdown for docs/benchmarks/birdseye.md and raw numbers.
 """
 
 from __future__ import annotations

@@ -13,9 +13,9 @@ compressedDepth/PNG messages whether the images inflate to the same bytes (an en
 deflate bytes, not different pixels).
 
 ``--src DIR`` runs another checkout (e.g. a ``git worktree`` of an older commit) with this venv
-(``PYTHONPATH=DIR``), for the before/after comparison in BENCHMARKS.md.
+(``PYTHONPATH=DIR``), for the before/after comparison in docs/benchmarks/determinism.md.
 
-Prints markdown for BENCHMARKS.md; writes the raw numbers as JSON (default
+Prints markdown for docs/benchmarks/determinism.md; writes the raw numbers as JSON (default
 ``benchmarks/results/determinism_<date>.json``).
 """
 

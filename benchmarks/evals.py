@@ -11,7 +11,7 @@
 3. ``python -m simlan_data.view --save``: wall time and .rrd size for a golden recording and for
    the first recording of the suite, beside the recording's own size.
 
-Prints markdown for BENCHMARKS.md and the raw numbers as JSON. The cores are shared: the load
+Prints markdown for docs/benchmarks/evals.md and the raw numbers as JSON. The cores are shared: the load
 average before and after is printed; timed figures depend on it.
 """
 

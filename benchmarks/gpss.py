@@ -13,7 +13,7 @@
    reads the accuracy, the localizer's time per processed frame (median; full-frame searches and
    region searches separately) and the replay speed.
 
-Prints markdown for BENCHMARKS.md and writes the raw numbers as JSON.
+Prints markdown for docs/benchmarks/gpss.md and writes the raw numbers as JSON.
 """
 
 from __future__ import annotations

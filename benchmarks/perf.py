@@ -394,7 +394,7 @@ def main() -> None:
         print(rtf_markdown(rows), flush=True)
         if want("launchers"):
             # basic, joblib, joblib, basic: each launcher twice, in an order that cancels a host
-            # that speeds up or slows down steadily during the run (it does: BENCHMARKS.md,
+            # that speeds up or slows down steadily during the run (it does: docs/benchmarks/realtime.md,
             # "Real-time camera networks", section 3)
             joblib_s, par = sweep(out / "sweep_joblib", "joblib", sweep_args)
             joblib2_s, par2 = sweep(out / "sweep_joblib_2", "joblib", sweep_args)

@@ -14,7 +14,7 @@ does what is missing):
    multi-view fusion MLP on cameras 500-503, alone and followed by the kinematic fit
    (``algorithms.posemap.refine=fit``); the fit's information bound (started from and pulled towards the
    true joints: what no estimate from these landmarks can beat by much);
-3. prints markdown for BENCHMARKS.md (SIMLAN's reported 0.2465 rad AutoGluon and 0.359 rad MLP
+3. prints markdown for docs/benchmarks/posemap.md (SIMLAN's reported 0.2465 rad AutoGluon and 0.359 rad MLP
    beside ours) and the raw JSON. Accuracy figures do not depend on load; timed ones do.
 """
 
@@ -83,7 +83,7 @@ MODELS = {
 
 
 def dump_raw(raw: dict, path: Path | None) -> None:
-    """The raw figures as a JSON block for BENCHMARKS.md, and into ``path`` if given."""
+    """The raw figures as a JSON block for docs/benchmarks/posemap.md, and into ``path`` if given."""
     text = json.dumps(raw, indent=1, sort_keys=True)
     print("\n```json\n" + text + "\n```")
     if path:

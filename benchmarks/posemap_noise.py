@@ -11,7 +11,7 @@ information bound at that noise (a simulated ideal estimator, ``posemap.py``'s
 ``information_bound``). One pixel at 960x540 is four of the cameras' calibrated 3840x2160.
 
 The default noise is not changed by this study: it stays 1 px, where the target is below the
-bound (BENCHMARKS.md). Existing datasets and models in ``--workdir`` are reused.
+bound (docs/benchmarks/posemap.md). Existing datasets and models in ``--workdir`` are reused.
 """
 
 from __future__ import annotations

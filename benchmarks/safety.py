@@ -12,7 +12,7 @@
 3. Runs ``-m experiment=collision_case1`` and ``collision_case2`` (unless --skip-sweeps) and
    includes their collision tables.
 
-Prints markdown for BENCHMARKS.md and the raw numbers as JSON. Accuracy figures do not depend on
+Prints markdown for docs/benchmarks/safety.md and the raw numbers as JSON. Accuracy figures do not depend on
 the machine's load; the wall times do (the load average is printed).
 """
 

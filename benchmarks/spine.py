@@ -2,7 +2,7 @@
 
     python benchmarks/spine.py [--quick] [--only SECTION]
 
-Prints markdown for BENCHMARKS.md. Every figure comes from this one run, baselines beside them.
+Prints markdown for docs/benchmarks/spine.md. Every figure comes from this one run, baselines beside them.
 """
 
 from __future__ import annotations

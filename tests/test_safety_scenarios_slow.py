@@ -1,4 +1,4 @@
-"""The safety scenarios end to end, guarding BENCHMARKS.md's figures (slow: about a minute each).
+"""The safety scenarios end to end, guarding the figures of docs/benchmarks/safety.md (slow: about a minute each).
 
 Over restricted_zone, blind_spot and humanoid_crossing: no violation missed, every stop within
 one control period + one camera period of the hazard's onset in ground truth, no zone entered,

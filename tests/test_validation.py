@@ -1,7 +1,7 @@
 """Every boundary refuses bad input with one clear line (table-driven), and the CLIs exit with 2.
 
 The tables live in ``reliability_cases.py`` (``benchmarks/reliability.py`` counts them for
-BENCHMARKS.md). Each case runs the real loading path: config composed by Hydra and checked as a
+docs/benchmarks/reliability.md). Each case runs the real loading path: config composed by Hydra and checked as a
 run checks it, calibration files loaded by OpenCV, URDFs parsed, layouts read by polars,
 recordings opened and read by rosbags.
 """

@@ -182,7 +182,7 @@ def _uncertainty(side_px: float, reproj_px: float, size_m: float) -> tuple[float
 
     Calibrated on rendered 960x540 frames with contour corner refinement: fixes scatter by about
     0.13 px at the marker in position and about 14 degree-pixels over the marker's side in yaw,
-    from 15 px to 60 px wide markers (BENCHMARKS.md, GPSS). A poor fit of the square (reprojection
+    from 15 px to 60 px wide markers (docs/benchmarks/gpss.md). A poor fit of the square (reprojection
     error) inflates both.
     """
     metres_per_px = size_m / max(side_px, 1.0)

@@ -201,7 +201,7 @@ def choose_reader(requested: str, *, cpu_count: int | None = None, load_1min: fl
     (1-minute load average < cores - 0.5), else the reading thread; off Linux always the thread
     (the reading process forks).
 
-    Measured on the 20 s 12-camera recording, 2 cores (BENCHMARKS.md, section 5): on a quiet
+    Measured on the 20 s 12-camera recording, 2 cores (docs/benchmarks/realtime.md, section 5): on a quiet
     or lightly loaded machine the process was 8-35 % faster (the bag's Python record walk leaves the replay's
     GIL); with two busy processes beside it, it was slower (its images cross a pipe, and the
     extra process competes for the cores). The load average lags (a minute): right after other
