@@ -61,12 +61,6 @@ CPP_KEYWORDS = frozenset(
     synchronized template this thread_local throw true try typedef typeid typename union
     unsigned using virtual void volatile wchar_t while xor xor_eq""".split()  # noqa: SIM905 (a word list reads better as text)
 )
-# SafetyEvent's field `namespace` breaks the C++ generator (measured: colcon build with Debian's
-# rosidl_generator_cpp, "expected unqualified-id before 'namespace'"). Renaming it changes the
-# recording format, which is not this test file's to decide; strict, so the fix must remove this.
-SAFETY_EVENT_NAMESPACE = pytest.mark.xfail(
-    strict=True, reason="SafetyEvent.namespace is a C++ keyword: the field must be renamed"
-)
 
 
 # ------------------------------------------------------------------------------ ROS tools
@@ -269,7 +263,7 @@ def test_a_msg_that_differs_from_the_bag_is_reported(all_types_bag: Path) -> Non
 @pytest.mark.parametrize(
     "name",
     [
-        pytest.param(name, marks=SAFETY_EVENT_NAMESPACE) if name == "SafetyEvent" else name
+        name
         for name in sorted(_shipped_texts())
     ],
 )
@@ -407,7 +401,6 @@ def _workspace(src: Path, bag: Path) -> None:
 
 
 @pytest.mark.slow
-@SAFETY_EVENT_NAMESPACE
 def test_colcon_builds_the_package_with_debians_rosidl_generators(
     tmp_path: Path, all_types_bag: Path
 ) -> None:

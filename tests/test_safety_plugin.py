@@ -101,7 +101,7 @@ def plugin_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str
 def test_the_plugin_stops_the_robot_live(plugin_run: tuple[Path, dict[str, str]]) -> None:
     run_dir, _ = plugin_run
     events = _read(run_dir, ["/safety/events"])
-    stops = [e for _, e in events if e.namespace == "robot_agent_1" and e.action == "stop"]
+    stops = [e for _, e in events if e.robot == "robot_agent_1" and e.action == "stop"]
     t_stop = next(t for t, e in events if e.action == "stop")
     assert stops and stops[0].cause == "circle" and stops[0].detail == "inside the circle"
     assert np.hypot(stops[0].pose.position.x - 2.0, stops[0].pose.position.y - 1.5) <= 1.0 + 1e-6

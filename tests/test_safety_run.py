@@ -104,7 +104,7 @@ def _events(run_dir: Path) -> list:
 
 
 def test_zone_entry_is_prevented_in_a_real_run(safety_run: Path) -> None:
-    events = [e for e in _events(safety_run) if e.namespace == "robot_agent_1"]
+    events = [e for e in _events(safety_run) if e.robot == "robot_agent_1"]
     assert [(e.action, e.cause, e.other) for e in events] == [("stop", "restricted_area", "test_bay")]
     zone = Polygon(ZONE)
     truck = AGENT_TYPES["pallet_truck"].footprint_m
@@ -133,7 +133,7 @@ def test_zone_entry_is_prevented_in_a_real_run(safety_run: Path) -> None:
 
 
 def test_blind_spot_stop_in_a_real_run(safety_run: Path) -> None:
-    events = [e for e in _events(safety_run) if e.namespace == "robot_agent_2"]
+    events = [e for e in _events(safety_run) if e.robot == "robot_agent_2"]
     assert [(e.action, e.cause) for e in events] == [("stop", "unobserved")]
     stop = events[0]
     stop_s = stop.header.stamp.sec + stop.header.stamp.nanosec * 1e-9

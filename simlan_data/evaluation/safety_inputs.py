@@ -194,7 +194,7 @@ def event_of(m: Any) -> SafetyEvent:
     e = m.msg
     pose = (e.pose.position.x, e.pose.position.y, _yaw(e.pose.orientation))
     return SafetyEvent(
-        m.stamp_ns, e.namespace, e.cause, e.action, pose, e.speed_mps, e.detail, e.other, e.pose_valid
+        m.stamp_ns, e.robot, e.cause, e.action, pose, e.speed_mps, e.detail, e.other, e.pose_valid
     )
 
 

@@ -378,7 +378,7 @@ def safety_event(
     x, y, yaw = (float(v) for v in pose) if pose is not None else (0.0, 0.0, 0.0)
     return SafetyEventMsg(
         header=header(stamp_ns, schema.MAP_FRAME),
-        namespace=namespace,
+        robot=namespace,  # the field is "robot": "namespace" is a C++ keyword (rosidl)
         cause=cause,
         action=action,
         pose=_planar_pose(x, y, yaw),
