@@ -49,6 +49,7 @@ from reliability_helpers import (
 )
 
 from common import machine, run_cli, table
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 
 NS = 1_000_000_000
 
@@ -104,9 +105,10 @@ def kill_points(
             continue
         report = json.loads(out)
         got = messages_in_file_order(run_dir / "recording")
-        last_s = max(m.log_time for m in got) / NS
-        before_window = sum(1 for m in reference if m.log_time < (reached_s - flush_s) * NS)
-        upto_reached = sum(1 for m in reference if m.log_time <= reached_s * NS)
+        sim = [m.log_time - DEFAULT_EPOCH_NS for m in reference]  # simulated time (timebase.py)
+        last_s = (max(m.log_time for m in got) - DEFAULT_EPOCH_NS) / NS
+        before_window = sum(1 for t in sim if t < (reached_s - flush_s) * NS)
+        upto_reached = sum(1 for t in sim if t <= reached_s * NS)
         rows.append(
             {
                 "config": name,

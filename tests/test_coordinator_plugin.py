@@ -18,6 +18,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from conftest import run_cli
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 
 MODULE = textwrap.dedent(
     """
@@ -69,7 +70,8 @@ def _speeds(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         for _, channel, message, msg in reader.iter_decoded_messages(log_time_order=True):
             if channel.topic.endswith("/cmd_vel"):
-                out.setdefault(channel.topic.split("/")[1], []).append((message.log_time, msg.twist.linear.x))
+                t = message.log_time - DEFAULT_EPOCH_NS  # simulated time
+                out.setdefault(channel.topic.split("/")[1], []).append((t, msg.twist.linear.x))
     return out
 
 

@@ -32,6 +32,7 @@ from reliability_helpers import (
 from conftest import run_cli
 from simlan_data.constants import FORMAT_VERSION, NS_PER_S
 from simlan_data.recording.reader import RecordingReader
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 
 FLUSH_PERIOD_S = 1.0  # the default recording.flush_period_s
 TRUTH_STEP_S = 1 / 60  # messages come at least this often (ground truth)
@@ -65,10 +66,12 @@ def test_sigkill_at_several_points_recovers_all_but_the_last_flush_period(tmp_pa
         assert f"before {reached_s:.3f} s, the last camera tick the run reported" in rec.stdout
         got = messages_in_file_order(run_dir / "recording")
         assert got == reference[: len(got)], "recovered messages are not the start of the complete run"
-        last_s = max(m.log_time for m in got) / NS_PER_S
+        last_s = (max(m.log_time for m in got) - DEFAULT_EPOCH_NS) / NS_PER_S
         assert last_s >= reached_s - FLUSH_PERIOD_S - TRUTH_STEP_S, (kill_s, reached_s, last_s)
         # every message stamped more than one flush period before the kill is there
-        must = sum(1 for m in reference if m.log_time < (reached_s - FLUSH_PERIOD_S) * NS_PER_S)
+        must = sum(
+            1 for m in reference if m.log_time - DEFAULT_EPOCH_NS < (reached_s - FLUSH_PERIOD_S) * NS_PER_S
+        )
         assert len(got) >= must
         # ROS 2 tools see a normal bag: every message decodes with mcap_ros2, metadata is v9
         with mcap_file(run_dir / "recording").open("rb") as f:

@@ -23,6 +23,7 @@ from simlan_data.algorithms.posemap.motion import load_motion
 from simlan_data.constants import URDF_DIR
 from simlan_data.errors import RecordingInputError
 from simlan_data.geometry.calibration import load_calibration
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 from simlan_data.sim.agents import spawn_agent
 from simlan_data.sim.pybullet_client import connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
@@ -273,7 +274,7 @@ def test_drive_replays_landmarks_through_the_model(trained: tuple[Path, Path], t
             f, decoder_factories=[DecoderFactory()]
         ).iter_decoded_messages():
             if channel.topic == "/robot_agent_1/joint_states":
-                states.append((message.log_time, list(msg.name), np.array(msg.position)))
+                states.append((message.log_time - DEFAULT_EPOCH_NS, list(msg.name), np.array(msg.position)))
             elif channel.topic.endswith("/pose_landmarks"):
                 landmarks += 1
                 assert msg.estimator == "replay" and len(msg.x) == 33

@@ -21,6 +21,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from conftest import run_cli
 from simlan_data.algorithms.posemap.dataset import read_dataset
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 from simlan_data.sim.posemap_inputs import stream_from_recording
 
 MAPPER = '''
@@ -137,7 +138,7 @@ def test_a_users_mapper_drives_the_humanoid_live(
         for _, _, message, msg in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
             topics=["/robot_agent_1/joint_states"]
         ):
-            states.append((message.log_time, np.array(msg.position)))
+            states.append((message.log_time - DEFAULT_EPOCH_NS, np.array(msg.position)))
     assert len(states) == 21  # 1 s at the 20 Hz control rate
     data = read_dataset(str(ds))  # the dataset's cameras: the context of the drive
     expected = nearest(ds, list(data.cameras), data.landmarks[:6], 5)

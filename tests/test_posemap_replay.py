@@ -27,6 +27,7 @@ from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers t
 from simlan_data.evaluation.suite import Job
 from simlan_data.evaluation.suite_report import plot_posemap
 from simlan_data.evaluation.suite_spec import load_suite
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 from simlan_data.sim.posemap_inputs import stream_from_recording
 from simlan_data.world.skeleton import JOINT_NAMES
 
@@ -62,7 +63,7 @@ def _truth(run: Path) -> tuple[dict[int, np.ndarray], tuple[float, float]]:
             f, decoder_factories=[DecoderFactory()]
         ).iter_decoded_messages(topics=["/robot_agent_1/joint_states", "/ground_truth/poses"]):
             if channel.topic == "/robot_agent_1/joint_states":
-                joints[message.log_time] = np.array(msg.position)
+                joints[message.log_time - DEFAULT_EPOCH_NS] = np.array(msg.position)  # simulated time
             elif base is None:
                 t = msg.transforms[0].transform.translation
                 base = (t.x, t.y)

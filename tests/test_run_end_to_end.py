@@ -15,6 +15,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from conftest import run_cli
 from simlan_data.constants import FORMAT_VERSION
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 
 CAMERAS = [str(c) for c in range(160, 171)]
 
@@ -70,12 +71,12 @@ def test_every_topic_is_present(bag: dict[str, list]) -> None:
 
 def test_clock_and_ground_truth_rates(bag: dict[str, list]) -> None:
     clock = [stamp for stamp, _ in bag["/clock"]]
-    assert clock == sorted(clock) and clock[0] == 0
+    assert clock == sorted(clock) and clock[0] == DEFAULT_EPOCH_NS  # simulated time 0 (timebase.py)
     gt = bag["/ground_truth/poses"]
     times = np.array([t for t, _ in gt]) / 1e9
     assert 1.0 / np.diff(times).max() >= 50.0  # >= 50 Hz
     tf = gt[-1][1].transforms[0]
-    assert tf.header.frame_id == "map" and tf.child_frame_id == "robot_agent_1/base_link"
+    assert tf.header.frame_id == "map" and tf.child_frame_id == "ground_truth/robot_agent_1/base_link"
     # the truck starts at (-16, 0.4) and drives east along the aisle
     first, last = gt[0][1].transforms[0].transform.translation, tf.transform.translation
     assert first.x == pytest.approx(-16.0, abs=0.05) and first.y == pytest.approx(0.4, abs=0.05)

@@ -27,6 +27,8 @@ from shapely.geometry import Polygon
 from conftest import run_cli
 from simlan_data.algorithms.safety.geometry import footprint_polygon
 from simlan_data.metrics_io import load_metrics
+from simlan_data.recording import schema
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 from simlan_data.world.agent_types import AGENT_TYPES
 
 ZONE = [[2.6, -2.4], [4.5, -2.4], [4.5, 3.2], [2.6, 3.2]]
@@ -83,7 +85,7 @@ def _read(run_dir: Path, topics: list[str]) -> list[_Msg]:
     with mcap.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         return [
-            _Msg(message.log_time, decoded)
+            _Msg(message.log_time - DEFAULT_EPOCH_NS, decoded)  # simulated time
             for _, _, message, decoded in reader.iter_decoded_messages(topics=topics, log_time_order=True)
         ]
 
@@ -92,7 +94,7 @@ def _truth(run_dir: Path, ns: str) -> np.ndarray:
     rows = []
     for m in _read(run_dir, ["/ground_truth/poses"]):
         for tf in m.ros_msg.transforms:
-            if tf.child_frame_id == f"{ns}/base_link":
+            if tf.child_frame_id == schema.ground_truth_frame(ns):
                 q, p = tf.transform.rotation, tf.transform.translation
                 yaw = np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y**2 + q.z**2))
                 rows.append((m.log_time_ns, p.x, p.y, yaw))
@@ -114,7 +116,7 @@ def test_zone_entry_is_prevented_in_a_real_run(safety_run: Path) -> None:
     ]
     assert min(gaps) > 0.2  # its true footprint never came near the zone
     assert gaps[-1] < 1.5  # and it did drive up to it (it would have entered)
-    stop_ns = events[0].header.stamp.sec * 10**9 + events[0].header.stamp.nanosec
+    stop_ns = events[0].header.stamp.sec * 10**9 + events[0].header.stamp.nanosec - DEFAULT_EPOCH_NS
     after = [
         m.ros_msg.twist.linear.x
         for m in _read(safety_run, ["/robot_agent_1/cmd_vel"])
@@ -136,7 +138,7 @@ def test_blind_spot_stop_in_a_real_run(safety_run: Path) -> None:
     events = [e for e in _events(safety_run) if e.robot == "robot_agent_2"]
     assert [(e.action, e.cause) for e in events] == [("stop", "unobserved")]
     stop = events[0]
-    stop_s = stop.header.stamp.sec + stop.header.stamp.nanosec * 1e-9
+    stop_s = (stop.header.stamp.sec * 10**9 + stop.header.stamp.nanosec - DEFAULT_EPOCH_NS) * 1e-9
     assert stop.pose_valid and stop.speed_mps > 0.5  # it was driving blind on its estimate
     status = [
         (m.log_time_ns * 1e-9, m.ros_msg.fix_age_s)

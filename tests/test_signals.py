@@ -16,6 +16,7 @@ from mcap.reader import make_reader
 from reliability_helpers import SMALL_RUN, mcap_file, messages_in_file_order, read_running, start_run
 
 from conftest import run_cli
+from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 
 LONG = "duration_s=60"  # never reached: the signal comes first
 
@@ -63,7 +64,7 @@ def test_a_signal_stops_the_run_and_finalizes_everything_it_recorded(
     assert summary is not None and summary.statistics is not None
     messages = messages_in_file_order(bag)
     assert len(messages) == summary.statistics.message_count
-    last_s = max(m.log_time for m in messages) / 1e9
+    last_s = (max(m.log_time for m in messages) - DEFAULT_EPOCH_NS) / 1e9  # simulated time
     assert reached <= last_s + 0.25 and last_s < 60  # it recorded up to where the clock was, no further
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["message_count"] == len(messages)

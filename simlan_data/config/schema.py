@@ -23,6 +23,7 @@ from simlan_data.config import collision as collision_scenario
 from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms, selected_algorithm
 from simlan_data.config.collision import CollisionScenarioConfig
 from simlan_data.errors import ConfigError
+from simlan_data.recording.timebase import DEFAULT_EPOCH, parse_epoch
 from simlan_data.world.physics import PhysicsParams
 
 NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
@@ -210,10 +211,27 @@ class RecordingConfig:
     flush_period_s: float = 1.0
     fsync: bool = False  # also force each flush to the disk: bounded loss on a power cut, not just a kill
     encode_threads: int = 2
+    # bag time = epoch + simulated time (recording/timebase.py): a fixed date keeps runs
+    # reproducible to the byte; set it to your wall time (`date -u +%FT%TZ`) if you prefer
+    epoch: str = DEFAULT_EPOCH
+
+    @property
+    def epoch_ns(self) -> int:
+        """The epoch in ns since 1970 (checked in ``__post_init__``)."""
+        return parse_epoch(self.epoch)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
             return
+        try:
+            parse_epoch(self.epoch)
+        except ValueError as err:
+            raise _bad(
+                "recording.epoch",
+                self.epoch,
+                str(err),
+                f"give an ISO 8601 UTC time such as recording.epoch={DEFAULT_EPOCH} (the default)",
+            ) from None
         _choice("recording.rgb_encoding", self.rgb_encoding, RGB_ENCODINGS)
         _choice("recording.depth_encoding", self.depth_encoding, DEPTH_ENCODINGS)
         _choice("recording.semantic_encoding", self.semantic_encoding, SEMANTIC_ENCODINGS)

@@ -101,7 +101,7 @@ class RecordedRows:
 
     def _truth(self, m: Message) -> None:
         for tf in m.msg.transforms:
-            ns = tf.child_frame_id.split("/")[0]
+            ns = schema.ground_truth_namespace(tf.child_frame_id)  # (old recordings' names too)
             p = tf.transform.translation
             self.truth.setdefault(ns, []).append((m.stamp_ns, p.x, p.y, _yaw(tf.transform.rotation)))
 
@@ -141,7 +141,7 @@ class RecordedRows:
 
 
 def ground_truth(reader: RecordingReader) -> dict[str, pl.DataFrame]:
-    """map -> base_link of every agent from /ground_truth/poses."""
+    """map -> ground_truth/<ns>/base_link of every agent from /ground_truth/poses, by namespace."""
     return RecordedRows().read(reader).truth_tables()
 
 

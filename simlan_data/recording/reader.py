@@ -1,4 +1,9 @@
-"""Read a recording: time-ordered typed messages by topic, and a ``ros2 bag info``-like summary."""
+"""Read a recording: time-ordered typed messages by topic, and a ``ros2 bag info``-like summary.
+
+Times here are simulated time (ns from the run's start): the reader subtracts the bag's epoch
+(``timebase.py``) from log times, and adds it to the bounds it is asked for. Header stamps inside
+decoded messages stay as recorded (bag time: ``epoch_ns`` + simulated time).
+"""
 
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ from simlan_data.errors import RecordingInputError
 from simlan_data.recording import losses, schema
 from simlan_data.recording.bounded import load_yaml_without_aliases, require_regular
 from simlan_data.recording.run_marker import read_running, writer_alive
+from simlan_data.recording.timebase import format_epoch, recorded_epoch
 
 METADATA_KEY_FORMAT = "simlan.format_version"
 # Every read of a topic decompresses and walks all chunks that hold it, and images share every
@@ -35,7 +41,8 @@ SMALL_TOPICS_CACHE_MAX_MESSAGES = 500_000
 
 @dataclass(frozen=True)
 class Message:
-    """One message: topic, log time (simulated clock, ns), type name and the decoded object."""
+    """One message: topic, log time (simulated clock, ns: the bag's log time less its epoch), type
+    name and the decoded object."""
 
     topic: str
     stamp_ns: int
@@ -144,6 +151,10 @@ class RecordingReader:
         self._small: list[tuple[Any, int, bytes]] | None = None  # see STREAMED_TYPES
         self._small_pickled: bytes | None = None  # see adopt_small_topics
         self._register_bag_types()
+        try:
+            self.epoch_ns = recorded_epoch(self.custom_data)  # 0 for bags made before epochs
+        except ValueError as err:
+            raise _bad(p, f"metadata.yaml custom_data: {err}") from None
         self.format_version = self.custom_data.get(METADATA_KEY_FORMAT, "")
         if check_format:
             self._check_format()
@@ -169,11 +180,13 @@ class RecordingReader:
 
     @property
     def start_ns(self) -> int:
-        return int(self._reader.start_time)
+        """The first log time, simulated clock (0 for a recording made by a run)."""
+        return int(self._reader.start_time) - self.epoch_ns
 
     @property
     def end_ns(self) -> int:
-        return int(self._reader.end_time)
+        """The last log time, simulated clock."""
+        return int(self._reader.end_time) - self.epoch_ns
 
     @property
     def duration_ns(self) -> int:
@@ -269,14 +282,18 @@ class RecordingReader:
         stop_ns: int | None = None,
         raw: bool = False,
     ) -> Iterator[Message]:
-        """Yield messages in log-time order, decoded unless ``raw`` (then ``msg`` is bytes)."""
+        """Yield messages in log-time order, decoded unless ``raw`` (then ``msg`` is bytes);
+        ``start_ns`` <= simulated time < ``stop_ns`` where given."""
         wanted = set(topics) if topics is not None else None
         conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if not conns:
             return
+        epoch = self.epoch_ns
+        start = None if start_ns is None else start_ns + epoch
+        stop = None if stop_ns is None else stop_ns + epoch
         try:
-            for conn, stamp, data in self._raw_messages(conns, start_ns, stop_ns):
-                message = Message(conn.topic, int(stamp), conn.msgtype, data)
+            for conn, stamp, data in self._raw_messages(conns, start, stop):
+                message = Message(conn.topic, int(stamp) - epoch, conn.msgtype, data)
                 yield message if raw else self.deserialize(message)
         except RecordingInputError:
             raise
@@ -302,7 +319,8 @@ class RecordingReader:
     def _raw_messages(
         self, conns: list[Any], start_ns: int | None, stop_ns: int | None, *, cache: bool = True
     ) -> Iterator[tuple[Any, int, bytes]]:
-        """(connection, log time, CDR bytes) in log-time order; small topics from the cache."""
+        """(connection, log time, CDR bytes) in log-time order; small topics from the cache.
+        Bag time (with the epoch), as rosbags reads it."""
         if self._small_pickled is not None:
             self._unpickle_small()
         small = [c for c in self._reader.connections if c.msgtype not in STREAMED_TYPES]
@@ -391,11 +409,11 @@ class RecordingReader:
             except Exception as err:
                 raise RecordingInputError(
                     "message undecodable",
-                    f"{self.path} topic {conn.topic} at {stamp} ns",
+                    f"{self.path} topic {conn.topic} at {int(stamp) - self.epoch_ns} ns",
                     f"{type(err).__name__}: {err}",
                     "the recording is corrupt; try --recover",
                 ) from err
-            return Message(conn.topic, int(stamp), conn.msgtype, msg)
+            return Message(conn.topic, int(stamp) - self.epoch_ns, conn.msgtype, msg)
         return None
 
     def firsts(self, topics: Iterable[str]) -> dict[str, Message]:
@@ -409,7 +427,9 @@ class RecordingReader:
             return out
         for conn, stamp, data in self._raw_messages(conns, None, None, cache=False):
             if conn.topic not in out:
-                out[conn.topic] = self.deserialize(Message(conn.topic, int(stamp), conn.msgtype, data))
+                out[conn.topic] = self.deserialize(
+                    Message(conn.topic, int(stamp) - self.epoch_ns, conn.msgtype, data)
+                )
                 if len(out) == len(present):
                     break
         return out
@@ -427,6 +447,7 @@ class RecordingReader:
             f"Duration:          {self.duration_ns / NS_PER_S:.3f}s",
             f"Start:             {self.start_ns / NS_PER_S:.3f} (simulated clock, s)",
             f"End:               {self.end_ns / NS_PER_S:.3f}",
+            f"Epoch:             {format_epoch(self.epoch_ns)} (log times and stamps: epoch + simulated clock)",
             f"Messages:          {self.message_count}",
         ]
         if self.recovered:

@@ -5,7 +5,8 @@ A killed run leaves ``recording.mcap`` without its summary section and the bag w
 
     recording.mcap --salvage.scan (streaming, checked)--> schemas, channels, messages
         --> RecordingWriter: a new bag under recording/.recover/ (same topics, message bytes,
-            log times; chunks with CRCs, summary, metadata.yaml v9 with custom_data)
+            log times; chunks with CRCs, summary, metadata.yaml v9 with custom_data, the epoch
+            of the recorded config among it: timebase.py)
         --> read back with RecordingReader (message count must match)
         --> commit by renames: the original kept as recording.mcap.damaged (a hard link), the
             new file over it, metadata.yaml last (the commit point: readers need it)
@@ -38,6 +39,7 @@ from simlan_data.recording.bounded import load_yaml_without_aliases, require_reg
 from simlan_data.recording.reader import MAX_METADATA_BYTES, METADATA_KEY_FORMAT, RecordingReader
 from simlan_data.recording.run_marker import RunMarker, mark_incomplete, read_running, writer_alive
 from simlan_data.recording.salvage import Salvage, scan
+from simlan_data.recording.timebase import EPOCH_KEY
 from simlan_data.recording.writer import RecordingWriter
 
 WORK_DIRNAME = ".recover"
@@ -257,6 +259,7 @@ def _custom_data(bag: Path, salvage: Salvage) -> dict[str, str]:
             text = meta.read_text()
             old = load_yaml_without_aliases(text)["rosbag2_bagfile_information"].get("custom_data") or {}
             data.update({str(k): str(v) for k, v in old.items()})
+    data.setdefault(EPOCH_KEY, str(salvage.epoch_ns))  # (the writer copies log times as they are)
     info = salvage.run_info
     if info is not None and METADATA_KEY_FORMAT not in data:
         data.update(

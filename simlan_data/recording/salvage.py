@@ -15,11 +15,14 @@
        at every later chunk, and its chunk index finds the message indexes of damaged chunks
 
 Used by ``recording.recover`` (which writes what is found into a new bag) and its ``--dry-run``.
+Callbacks get the file's records as they are; :class:`Salvage` times are simulated time (the
+file's bag time less the recorded config's ``recording.epoch``, 0 if none: ``timebase.py``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import struct
 import sys
 import zlib
@@ -46,6 +49,7 @@ from simlan_data.errors import RecordingInputError
 from simlan_data.recording import schema
 from simlan_data.recording.bounded import load_yaml_without_aliases, require_regular
 from simlan_data.recording.losses import ALL_TOPICS, Loss
+from simlan_data.recording.timebase import parse_epoch
 
 MAX_CHUNK_BYTES = (
     1 << 30
@@ -92,6 +96,7 @@ class Salvage:
     last_ns: int | None = None
     run_info: Any = None
     config: dict[str, Any] = field(default_factory=dict)
+    epoch_ns: int = 0  # of the recorded config: the file's log times less this are the times above
 
     @property
     def messages(self) -> int:
@@ -527,7 +532,23 @@ def scan(
                 )
             )
         take.orphan_losses()
+    _to_simulated_time(out)
     return out
+
+
+def _to_simulated_time(out: Salvage) -> None:
+    """Turn the file's times (bag time) into simulated time, by the recorded config's epoch."""
+    epoch = (out.config.get("recording") or {}).get("epoch") if isinstance(out.config, dict) else None
+    with contextlib.suppress(ValueError, AttributeError):
+        out.epoch_ns = parse_epoch(str(epoch)) if epoch is not None else 0
+    e = out.epoch_ns
+    out.first_ns, out.last_ns = (None if t is None else t - e for t in (out.first_ns, out.last_ns))
+    out.tail_chunk = None if out.tail_chunk is None else (out.tail_chunk[0] - e, out.tail_chunk[1] - e)
+    out.damaged = [dataclasses.replace(d, start_ns=d.start_ns - e, end_ns=d.end_ns - e) for d in out.damaged]
+    out.losses = [
+        dataclasses.replace(x, from_ns=x.from_ns - e, to_ns=None if x.to_ns is None else x.to_ns - e)
+        for x in out.losses
+    ]
 
 
 def _summary(f: BinaryIO, size: int) -> Any:

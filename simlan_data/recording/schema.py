@@ -5,8 +5,14 @@ files shipped in ``simlan_data/recording/msg`` and embedded in each bag's MCAP s
 MCAP/ROS 2 reader can decode them without ROS installed.
 
 Frames (SIMLAN's): ``map`` is the world, static at the origin; ``camera_<id>_optical_frame`` is a
-camera (OpenCV axes: x right, y down, z forward); ``<ns>/base_link`` is an agent. Ground truth is
-on ``/ground_truth/...`` topics, never on ``/tf``.
+camera (OpenCV axes: x right, y down, z forward); ``<ns>/base_link`` is an agent as its
+localization sees it (``map -> <ns>/odom`` on /tf_static, ``<ns>/odom -> <ns>/base_link`` on /tf);
+``ground_truth/<ns>/base_link`` is where the agent truly is (``map ->`` it on
+``/ground_truth/poses``, never on ``/tf``). Every frame has one parent (REP 105), so viewers that
+read every TFMessage topic (Rerun, Foxglove) show both the estimate and the truth.
+
+Time: log times and header stamps are bag time, the simulated clock plus the recording's epoch
+(``timebase.py``).
 """
 
 from __future__ import annotations
@@ -79,6 +85,25 @@ def base_link_frame(namespace: str) -> str:
 
 def odom_frame(namespace: str) -> str:
     return f"{namespace}/odom"
+
+
+GROUND_TRUTH_FRAME_PREFIX = "ground_truth/"
+
+
+def ground_truth_frame(namespace: str) -> str:
+    """The frame ``/ground_truth/poses`` places an agent at: ``ground_truth/<ns>/base_link``.
+
+    Not ``<ns>/base_link``: /tf already gives that frame a parent (``<ns>/odom``, the estimate), and
+    a frame has one parent (REP 105). Named like the topic, so a viewer's frame list groups the
+    ground truth apart from the estimates.
+    """
+    return GROUND_TRUTH_FRAME_PREFIX + base_link_frame(namespace)
+
+
+def ground_truth_namespace(child_frame_id: str) -> str:
+    """The agent namespace of a child frame of ``/ground_truth/poses``: ``ground_truth/<ns>/base_link``,
+    or ``<ns>/base_link`` as recordings before the ground-truth frames named it (both read alike)."""
+    return child_frame_id.removeprefix(GROUND_TRUTH_FRAME_PREFIX).split("/")[0]
 
 
 def camera_topics(
@@ -193,10 +218,18 @@ def agent_topics(namespace: str) -> dict[str, Topic]:
 
 
 GLOBAL_TOPICS: tuple[Topic, ...] = (
-    Topic(CLOCK, CLOCK_TYPE, "simulated clock, at the ground-truth rate"),
+    Topic(
+        CLOCK,
+        CLOCK_TYPE,
+        "simulated clock (bag time: recording.epoch + simulated time), at the ground-truth rate",
+    ),
     Topic(TF_STATIC, TF_TYPE, "map -> camera_<id>_optical_frame for every camera, map -> <ns>/odom (once)"),
     Topic(TF, TF_TYPE, "<ns>/odom -> <ns>/base_link from the camera-based localization, control rate"),
-    Topic(GROUND_TRUTH_POSES, TF_TYPE, "ground truth map -> <ns>/base_link of every agent (>= 50 Hz)"),
+    Topic(
+        GROUND_TRUTH_POSES,
+        TF_TYPE,
+        "ground truth map -> ground_truth/<ns>/base_link of every agent (>= 50 Hz)",
+    ),
     Topic(CONFIG, STRING_TYPE, "the resolved run config as YAML (once)"),
     Topic(RUN_INFO, RUN_INFO_TYPE, "format version, seed, package and dependency versions, renderer (once)"),
     Topic(SEMANTIC_LABELS, SEMANTIC_LABELS_TYPE, "semantic class id -> name table (once)"),

@@ -51,6 +51,7 @@ from rosbags.rosbag2.storage_mcap import (
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import RecordingError
 from simlan_data.recording.schema import LATCHED_TOPICS, ROS_DISTRO, Topic, typestore
+from simlan_data.recording.timebase import EPOCH_KEY
 
 MAX_PENDING = 256  # bound the messages (and frames) waiting for the file
 CHUNK_OPCODE, MESSAGE_INDEX_OPCODE = 0x06, 0x07
@@ -92,6 +93,7 @@ class RecordingWriter:
         flush_period_ns: int = NS_PER_S,
         encode_threads: int = 0,
         fsync: bool = False,
+        epoch_ns: int = 0,
     ) -> None:
         """Prepare a new bag at ``path`` (created by :meth:`open`).
 
@@ -101,6 +103,9 @@ class RecordingWriter:
             encode_threads: worker threads for encoding; 0 writes on the caller's thread.
             fsync: also force each flushed chunk to the disk (survives a power cut, not just a
                 killed process).
+            epoch_ns: added to every stamp given to the ``write`` methods (simulated time) to
+                make the log time; recorded in the metadata (``timebase.EPOCH_KEY``). Header
+                stamps are the caller's: build them with :meth:`stamp_ns`.
         """
         self.path = Path(path)
         if self.path.exists():
@@ -121,7 +126,11 @@ class RecordingWriter:
         self._newest_ns = 0
         self._marks = threading.Condition()
         self.fsync = fsync
+        self.epoch_ns = int(epoch_ns)
+        if self.epoch_ns < 0:
+            raise ValueError(f"epoch_ns must be >= 0, got {epoch_ns}")
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer.set_custom_data(EPOCH_KEY, str(self.epoch_ns))
         self.compression_level = int(compression_level)
         if compression == "zstd":
             self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
@@ -281,6 +290,10 @@ class RecordingWriter:
             self._writer.abort()
 
     # -------------------------------------------------------------------------------- writing
+    def stamp_ns(self, t_ns: int) -> int:
+        """The header stamp of simulated time ``t_ns``: bag time, as the log time it is written at."""
+        return self.epoch_ns + int(t_ns)
+
     def write(self, topic: Topic, stamp_ns: int, msg: Any) -> None:
         """Queue a message object (serialized now)."""
         data = self._store.serialize_cdr(msg, topic.msgtype)
@@ -324,7 +337,7 @@ class RecordingWriter:
                 topic.name, topic.msgtype, typestore=self._store, offered_qos_profiles=offered_qos(topic.name)
             )
             self._connections[topic.name] = conn
-        self._writer.write(conn, stamp_ns, data)
+        self._writer.write(conn, self.epoch_ns + stamp_ns, data)  # bag time (recording/timebase.py)
         self.message_counts[topic.name] = self.message_counts.get(topic.name, 0) + 1
         self.byte_counts[topic.name] = self.byte_counts.get(topic.name, 0) + len(data)
 
@@ -346,6 +359,7 @@ class NullWriter(RecordingWriter):
 
     def __init__(self) -> None:
         self.message_counts, self.byte_counts, self.flushes = {}, {}, 0
+        self.epoch_ns = 0
 
     def __enter__(self) -> NullWriter:
         return self

@@ -80,13 +80,15 @@ class BirdseyeRecorder:
         if frame_index % self.every:
             return
         if self._last is not None and not any(im.changed for im in images):
-            self.writer.write_pending(self.topic, stamp_ns, _Restamped(self._last, stamp_ns))
+            self.writer.write_pending(
+                self.topic, stamp_ns, _Restamped(self._last, self.writer.stamp_ns(stamp_ns))
+            )
             return
         t0 = time.perf_counter()
         canvas = self.stitcher.at(stamp_ns).stitch([im.rgb for im in images])  # (a failure names the time)
         self.stitch_wall_s += time.perf_counter() - t0
         self.canvases += 1
-        encode = self._encode
+        encode, header_ns = self._encode, self.writer.stamp_ns(stamp_ns)
         self._last = self.writer.submit(
-            self.topic, stamp_ns, lambda: M.compressed_image(stamp_ns, schema.MAP_FRAME, *encode(canvas))
+            self.topic, stamp_ns, lambda: M.compressed_image(header_ns, schema.MAP_FRAME, *encode(canvas))
         )

@@ -123,9 +123,10 @@ class CameraRecorder:
         """Queue one camera frame; returns the future of the colour image's EncodedRgb, or None."""
         cid, frame = camera.camera_id, camera.frame_id
         topics = self.topics(cid)
+        stamp = self.writer.stamp_ns(t)  # header stamps: bag time (recording/timebase.py)
         if cid not in self._info:
             self._info[cid] = self.writer.serialize(topics["camera_info"], M.camera_info(0, camera))
-        self.writer.write_serialized(topics["camera_info"], t, M.restamp(self._info[cid], t))
+        self.writer.write_serialized(topics["camera_info"], t, M.restamp(self._info[cid], stamp))
         version = self._version.get(cid, -1) + int(images.changed or cid not in self._version)
         self._version[cid] = version
         arrays: dict[str, np.ndarray | None] = {"rgb": images.rgb}
@@ -139,7 +140,7 @@ class CameraRecorder:
             cached = self._cache.get(key)
             if cached is not None and cached[0] == version:
                 _, encoded, pending = cached
-                self.writer.write_pending(topic, t, _Restamped(pending, t))
+                self.writer.write_pending(topic, t, _Restamped(pending, stamp))
             else:
                 assert array is not None  # (the streams recorded are the streams rendered)
                 if key not in self._encoders:
@@ -147,10 +148,14 @@ class CameraRecorder:
                 encode = self._encoders[key]
                 if encode is None:
                     encoded = None
-                    pending = self.writer.submit(topic, t, functools.partial(M.raw_image, t, frame, array))
+                    pending = self.writer.submit(
+                        topic, t, functools.partial(M.raw_image, stamp, frame, array)
+                    )
                 else:
                     encoded = self.writer.run_async(encode, array)
-                    pending = self.writer.submit(topic, t, functools.partial(_compressed, t, frame, encoded))
+                    pending = self.writer.submit(
+                        topic, t, functools.partial(_compressed, stamp, frame, encoded)
+                    )
                 self.encoded += 1
                 self._cache[key] = (version, encoded, pending)
             if stream == "rgb":

@@ -191,7 +191,11 @@ class PoseDriver:
         if q is not None:
             self.agent.set_joints(q)
         self.writer.write(
-            self.topic, t_ns, M.joint_state(t_ns, self.frame_id, JOINT_NAMES, self.agent.joint_positions())
+            self.topic,
+            t_ns,
+            M.joint_state(
+                self.writer.stamp_ns(t_ns), self.frame_id, JOINT_NAMES, self.agent.joint_positions()
+            ),
         )
         self._publish_input(t_ns)
 
@@ -210,7 +214,7 @@ class PoseDriver:
                 topic,
                 t_ns,
                 M.pose_landmarks(
-                    t_ns,
+                    self.writer.stamp_ns(t_ns),
                     schema.camera_frame(cam),
                     self.stream.landmarks[k, c],
                     estimator="replay",
@@ -236,7 +240,12 @@ class PoseDriver:
                 topic,
                 t_ns,
                 M.pose_landmarks(
-                    t_ns, cam.frame_id, lm, estimator=self.estimator.name, width=cam.width, height=cam.height
+                    self.writer.stamp_ns(t_ns),
+                    cam.frame_id,
+                    lm,
+                    estimator=self.estimator.name,
+                    width=cam.width,
+                    height=cam.height,
                 ),
             )
 

@@ -172,9 +172,8 @@ def base_pose(reader: RecordingReader, namespace: str) -> tuple[float, float, fl
     """Where the posed humanoid's support base stands (x, y, yaw), from the first ground truth
     (None if the recording has none of ``namespace``)."""
     first = reader.first(schema.GROUND_TRUTH_POSES)
-    frame = schema.base_link_frame(namespace)
     for tf in first.msg.transforms if first is not None else []:
-        if tf.child_frame_id == frame:
+        if schema.ground_truth_namespace(tf.child_frame_id) == namespace:  # (old recordings' names too)
             t = tf.transform.translation
             return (
                 float(t.x),

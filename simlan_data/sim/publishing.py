@@ -51,13 +51,17 @@ def global_topic(name: str) -> schema.Topic:
     raise KeyError(name)
 
 
-def camera_tf(camera: CameraModel) -> Any:
-    """The static transform message map -> camera optical frame."""
-    return M.transform_stamped(0, schema.MAP_FRAME, camera.frame_id, camera.world_from_camera)
+def camera_tf(camera: CameraModel, stamp_ns: int = 0) -> Any:
+    """The static transform message map -> camera optical frame (header stamp ``stamp_ns``)."""
+    return M.transform_stamped(stamp_ns, schema.MAP_FRAME, camera.frame_id, camera.world_from_camera)
 
 
 class Publisher:
-    """Writes everything a run publishes besides camera images (see camera_recording.py)."""
+    """Writes everything a run publishes besides camera images (see camera_recording.py).
+
+    Methods take simulated time ``t`` (the writer adds the epoch to the log time); header stamps
+    are bag time, ``writer.stamp_ns(t)`` (recording/timebase.py).
+    """
 
     def __init__(self, writer: RecordingWriter, cfg: Config, agents: list[Agent]) -> None:
         self.writer, self.cfg = writer, cfg
@@ -85,7 +89,8 @@ class Publisher:
             ),
         )
         w.write(global_topic(schema.SEMANTIC_LABELS), 0, M.semantic_labels(dict(SEMANTIC_CLASSES)))
-        static = [camera_tf(c) for c in cameras]
+        start = w.stamp_ns(0)
+        static = [camera_tf(c, start) for c in cameras]
         for agent in self.agents:
             pose = agent.pose()
             self.odom[agent.namespace] = Transform.from_pose2d(
@@ -93,15 +98,17 @@ class Publisher:
             )
             static.append(
                 M.transform_stamped(
-                    0, schema.MAP_FRAME, schema.odom_frame(agent.namespace), self.odom[agent.namespace]
+                    start, schema.MAP_FRAME, schema.odom_frame(agent.namespace), self.odom[agent.namespace]
                 )
             )
         w.write(global_topic(schema.TF_STATIC), 0, M.tf_message(static))
 
     def ground_truth(self, t: int) -> None:
-        self.writer.write(global_topic(schema.CLOCK), t, M.clock(t))
+        stamp = self.writer.stamp_ns(t)
+        self.writer.write(global_topic(schema.CLOCK), t, M.clock(stamp))
+        # each agent's own ground-truth frame: <ns>/base_link's parent is <ns>/odom (/tf)
         poses = [
-            M.transform_stamped(t, schema.MAP_FRAME, schema.base_link_frame(a.namespace), a.pose())
+            M.transform_stamped(stamp, schema.MAP_FRAME, schema.ground_truth_frame(a.namespace), a.pose())
             for a in self.agents
         ]
         self.writer.write(global_topic(schema.GROUND_TRUTH_POSES), t, M.tf_message(poses))
@@ -112,17 +119,19 @@ class Publisher:
         self.writer.write(
             topic,
             t,
-            M.marker_detections(t, camera.frame_id, [d.marker_id for d in detections], corners, mode),
+            M.marker_detections(
+                self.writer.stamp_ns(t), camera.frame_id, [d.marker_id for d in detections], corners, mode
+            ),
         )
 
     def command(self, t: int, ns: str, v: float, w: float, collision: CollisionReading) -> None:
-        topics, frame = self.topics[ns], schema.base_link_frame(ns)
-        self.writer.write(topics["cmd_vel"], t, M.twist_stamped(t, frame, v, w))
+        topics, frame, stamp = self.topics[ns], schema.base_link_frame(ns), self.writer.stamp_ns(t)
+        self.writer.write(topics["cmd_vel"], t, M.twist_stamped(stamp, frame, v, w))
         self.writer.write(
             topics["collision"],
             t,
             M.collision_state(
-                t,
+                stamp,
                 frame,
                 in_collision=collision.in_collision,
                 max_force_n=collision.max_force_n,
@@ -132,14 +141,14 @@ class Publisher:
         )
 
     def estimates(self, t: int, estimates: dict[str, PoseEstimate], tracked: list[str]) -> None:
-        tfs = []
+        tfs, stamp = [], self.writer.stamp_ns(t)
         for ns in tracked:
             e = estimates.get(ns)
             self.writer.write(
                 self.topics[ns]["localization"],
                 t,
                 M.localization_status(
-                    t,
+                    stamp,
                     observed=e is not None and e.observed,
                     valid=e is not None and e.valid,
                     fix_age_s=e.age_s if e is not None else -1.0,
@@ -151,30 +160,32 @@ class Publisher:
             self.writer.write(
                 self.topics[ns]["pose_estimate"],
                 t,
-                M.pose_with_covariance(t, schema.MAP_FRAME, e.x_m, e.y_m, e.yaw_rad, e.covariance),
+                M.pose_with_covariance(stamp, schema.MAP_FRAME, e.x_m, e.y_m, e.yaw_rad, e.covariance),
             )
             self.writer.write(
                 self.topics[ns]["velocity_estimate"],
                 t,
-                M.twist_stamped(t, schema.base_link_frame(ns), e.speed_mps, e.yaw_rate_rps),
+                M.twist_stamped(stamp, schema.base_link_frame(ns), e.speed_mps, e.yaw_rate_rps),
             )
             odom_from_base = self.odom[ns].inverse() @ Transform.from_pose2d(e.x_m, e.y_m, e.yaw_rad)
             tfs.append(
-                M.transform_stamped(t, schema.odom_frame(ns), schema.base_link_frame(ns), odom_from_base)
+                M.transform_stamped(stamp, schema.odom_frame(ns), schema.base_link_frame(ns), odom_from_base)
             )
         if tfs:
             self.writer.write(global_topic(schema.TF), t, M.tf_message(tfs))
 
     def navigation(self, t: int, ns: str, nav: Navigator, blocked_by: tuple[str, ...]) -> None:
-        topics = self.topics[ns]
+        topics, stamp = self.topics[ns], self.writer.stamp_ns(t)
         if nav.new_plan and nav.plan is not None:
-            self.writer.write(topics["plan"], t, M.path(t, schema.MAP_FRAME, nav.plan.points_xy.tolist()))
+            self.writer.write(topics["plan"], t, M.path(stamp, schema.MAP_FRAME, nav.plan.points_xy.tolist()))
             nav.new_plan = False
         goal = nav.goal
         if goal is not None and self._goal_index.get(ns) != nav.index:
             self._goal_index[ns] = nav.index
             self.writer.write(
-                topics["goal"], t, M.pose_stamped(t, schema.MAP_FRAME, float(goal[0]), float(goal[1]), 0.0)
+                topics["goal"],
+                t,
+                M.pose_stamped(stamp, schema.MAP_FRAME, float(goal[0]), float(goal[1]), 0.0),
             )
         s = nav.status
         key = (s.state, nav.index, s.goals_reached, s.goals_failed, blocked_by)
@@ -184,7 +195,7 @@ class Publisher:
                 topics["navigation"],
                 t,
                 M.navigation_status(
-                    t,
+                    stamp,
                     state=s.state,
                     goal_index=nav.index,
                     goals_total=s.goals_total,
@@ -199,21 +210,26 @@ class Publisher:
     def safety_zones(self, zones: tuple[Zone, ...]) -> None:
         """The restricted areas, once at the start (they do not change during a run)."""
         self.writer.write(
-            global_topic(schema.SAFETY_ZONES), 0, M.zone_markers(0, [(z.name, z.points) for z in zones])
+            global_topic(schema.SAFETY_ZONES),
+            0,
+            M.zone_markers(self.writer.stamp_ns(0), [(z.name, z.points) for z in zones]),
         )
 
     def safety(
         self, t: int, states: dict[str, tuple[SafetyDecision, Monitor]], events: list[SafetyEvent]
     ) -> None:
         """New safety events, and every guarded robot's state (decision and monitor values)."""
+        stamp = self.writer.stamp_ns(t)
         for ev in events:
-            self.writer.write(global_topic(schema.SAFETY_EVENTS), t, safety_event_msg(ev))
+            self.writer.write(
+                global_topic(schema.SAFETY_EVENTS), t, safety_event_msg(ev, self.writer.stamp_ns(ev.stamp_ns))
+            )
         for ns, (decision, mon) in states.items():
             self.writer.write(
                 self.topics[ns]["safety_state"],
                 t,
                 M.safety_state(
-                    t,
+                    stamp,
                     state=decision.state,
                     cause=decision.cause,
                     speed_limit_mps=decision.speed_limit_mps,
@@ -227,13 +243,16 @@ class Publisher:
 
     def people(self, t: int, positions: list[tuple[float, float]]) -> None:
         self.writer.write(
-            global_topic(schema.PEOPLE_DETECTIONS), t, M.pose_array(t, schema.MAP_FRAME, positions)
+            global_topic(schema.PEOPLE_DETECTIONS),
+            t,
+            M.pose_array(self.writer.stamp_ns(t), schema.MAP_FRAME, positions),
         )
 
 
-def safety_event_msg(ev: SafetyEvent) -> Any:
+def safety_event_msg(ev: SafetyEvent, stamp_ns: int) -> Any:
+    """The message of ``ev``, header stamp ``stamp_ns`` (bag time)."""
     return M.safety_event(
-        ev.stamp_ns,
+        stamp_ns,
         namespace=ev.namespace,
         cause=ev.cause,
         action=ev.action,

@@ -151,6 +151,7 @@ class Simulation:
                     flush_period_ns=int(cfg.recording.flush_period_s * NS_PER_S),
                     encode_threads=cfg.recording.encode_threads,
                     fsync=cfg.recording.fsync,
+                    epoch_ns=cfg.recording.epoch_ns,
                 )
                 if cfg.recording.enabled
                 else NullWriter()
