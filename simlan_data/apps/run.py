@@ -37,6 +37,7 @@ from simlan_data.recording.run_marker import RunMarker, write_running
 
 if TYPE_CHECKING:
     from simlan_data.sim.simulation import RunStats
+    from simlan_data.viz.foxglove_live import LiveView
 
 # The simulator, the recorder's reader, OpenCV and the evaluation are imported where a run needs
 # them, not here: `--help` and a config error then answer without loading them (issue 22).
@@ -75,6 +76,7 @@ def execute(
             "simlan_data never overwrites a recording",
             "choose another hydra.run.dir",
         )
+    live = start_live_view(cfg, run_dir)  # (a taken port is refused here, before anything is written)
     run_dir.mkdir(parents=True, exist_ok=True)
     marker = run_dir / RUNNING_MARKER
     running = RunMarker.for_this_process(cfg.duration_s)
@@ -89,6 +91,8 @@ def execute(
     )
 
     def on_progress(t_s: float) -> None:
+        if live is not None:
+            live.pace(t_s)
         bar.update(round(t_s - bar.n, 6))
         # how far the clock got: after a crash, recovery compares it with what the file holds
         write_running(run_dir, replace(running, simulated_s=round(t_s, 9)))
@@ -97,7 +101,7 @@ def execute(
         return f"`python -m simlan_data.recover {run_dir}` reads what was recorded" if bag.exists() else ""
 
     try:
-        stats = sim.run(bag, progress=on_progress, stop=stop)
+        stats = sim.run(bag, progress=on_progress, stop=stop, listeners=[live.on_message] if live else [])
     except PluginError as err:  # the recording was finished: no recovery needed
         marker.unlink(missing_ok=True)
         kept = f"the recording up to then is kept in {bag}" if bag.exists() else ""
@@ -120,6 +124,8 @@ def execute(
         ) from err
     finally:
         bar.close()
+        if live is not None:
+            live.close()
     metrics = stats.metrics()
     import cv2
 
@@ -146,6 +152,24 @@ def execute(
     if not stats.stopped_early:  # (an interrupted run says so in its one error line)
         print_summary(cfg, stats, metrics, run_dir)
     return metrics
+
+
+def start_live_view(cfg: Config, run_dir: Path) -> LiveView | None:
+    """``live.foxglove=true``: start the Foxglove WebSocket server and say where it is, and
+    where the layout for this run's cameras and agents will be (after a simulated second)."""
+    if not cfg.live.foxglove:
+        return None
+    from simlan_data.viz.foxglove_layout import LAYOUT_FILENAME
+    from simlan_data.viz.foxglove_live import LiveView
+
+    layout = run_dir / LAYOUT_FILENAME
+    live = LiveView(cfg.live, name=cfg.scenario.name, layout_path=layout)
+    log.info(
+        "simlan_data: live view on %s (Foxglove: Open connection > Foxglove WebSocket; layout: Import from file %s)",
+        live.url,
+        layout,
+    )
+    return live
 
 
 def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_dir: Path) -> None:

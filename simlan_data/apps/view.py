@@ -36,14 +36,22 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="log every N-th image of each camera (default 1)",
     )
+    p.add_argument(
+        "--foxglove-layout",
+        type=Path,
+        metavar="FILE.json",
+        help="write a Foxglove layout for this recording's cameras and agents instead (docs/foxglove.md)",
+    )
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.foxglove_layout is not None:
+        return write_foxglove_layout(args.recording, args.foxglove_layout)
     from simlan_data.viz.rerun_export import export  # rerun and the readers: only once the arguments are good
 
-    args = build_parser().parse_args(argv)
     save: Path | None = args.save
     created: list[Path] = []
     if save is not None:
@@ -94,6 +102,27 @@ def main(argv: list[str] | None = None) -> int:
     )
     if save is not None:
         print(f"  open it with: rerun {save}")
+    return 0
+
+
+def write_foxglove_layout(recording: str, out: Path) -> int:
+    """``--foxglove-layout FILE.json``: the Foxglove layout for a recording's topics."""
+    from simlan_data.recording.reader import RecordingReader
+    from simlan_data.viz.foxglove_layout import build_layout, write_layout
+
+    if out.suffix != ".json" or out.exists():
+        raise ConfigError(
+            f"invalid --foxglove-layout {out}",
+            "arguments",
+            "exists (never overwritten)" if out.exists() else "a Foxglove layout file ends in .json",
+            "e.g. --foxglove-layout layout.json, a new file",
+        )
+    with RecordingReader(recording) as reader:
+        layout = build_layout(reader.topics)
+        where = reader.path
+    make_dirs(out.parent)
+    write_layout(out, layout)
+    print(f"foxglove layout for {where} -> {out} (Foxglove: Layouts > Import from file)")
     return 0
 
 

@@ -22,6 +22,7 @@ from simlan_data.algorithms.posemap.config import PosemapConfig
 from simlan_data.config import collision as collision_scenario
 from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms, selected_algorithm
 from simlan_data.config.collision import CollisionScenarioConfig
+from simlan_data.config.live import LiveConfig
 from simlan_data.errors import ConfigError
 from simlan_data.recording.timebase import DEFAULT_EPOCH, parse_epoch
 from simlan_data.world.physics import PhysicsParams
@@ -494,11 +495,13 @@ class Config:
     faults: FaultsConfig = field(default_factory=FaultsConfig)
     people: PeopleParams = field(default_factory=PeopleParams)  # person detection (the cameras' segmentation)
     collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
+    live: LiveConfig = field(default_factory=LiveConfig)  # a live view in Foxglove (config/live.py)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
             return
         self.posemap.check()
+        self.live.check_recording(self.recording.enabled)
         if not 0 < self.duration_s <= 24 * 3600:
             raise _bad(
                 "duration_s", self.duration_s, "must be within (0, 86400] seconds", "use e.g. duration_s=60"

@@ -34,7 +34,15 @@ if sys.version_info >= (3, 14):
 else:  # pragma: no cover - rosbags depends on backports.zstd before 3.14
     from backports import zstd
 from isal import isal_zlib
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.interfaces import (
+    Connection,
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.rosbag2.errors import WriterError
@@ -53,6 +61,8 @@ from simlan_data.errors import RecordingError
 from simlan_data.recording.schema import LATCHED_TOPICS, ROS_DISTRO, Topic, typestore
 from simlan_data.recording.timebase import EPOCH_KEY
 
+# what a listener gets for each message written: its connection, log time (ns) and CDR bytes
+WriteListener = Callable[[Connection, int, bytes], None]
 MAX_PENDING = 256  # bound the messages (and frames) waiting for the file
 CHUNK_OPCODE, MESSAGE_INDEX_OPCODE = 0x06, 0x07
 
@@ -151,6 +161,7 @@ class RecordingWriter:
         self.message_counts: dict[str, int] = {}
         self.byte_counts: dict[str, int] = {}
         self.flushes = 0
+        self._listeners: list[WriteListener] = []
 
     # ------------------------------------------------------------------------------ lifecycle
     def __enter__(self) -> RecordingWriter:
@@ -254,6 +265,12 @@ class RecordingWriter:
         """Store a string in metadata.yaml's custom_data (written at close)."""
         self._writer.set_custom_data(key, value)
 
+    def add_listener(self, listener: WriteListener) -> None:
+        """Call ``listener(connection, log_time_ns, data)`` with every message as it goes into the
+        file: its rosbags ``Connection`` (topic, type, the message definition the bag embeds), log
+        time and CDR bytes, in file order, on the thread that writes the file (a live view)."""
+        self._listeners.append(listener)
+
     def add_connection(self, topic: str, msgtype: str, *, msgdef: str, rihs01: str) -> None:
         """Declare a topic with its message definition as found in another bag (for recovery)."""
         if topic not in self._connections:
@@ -337,7 +354,10 @@ class RecordingWriter:
                 topic.name, topic.msgtype, typestore=self._store, offered_qos_profiles=offered_qos(topic.name)
             )
             self._connections[topic.name] = conn
-        self._writer.write(conn, self.epoch_ns + stamp_ns, data)  # bag time (recording/timebase.py)
+        log_ns = self.epoch_ns + stamp_ns  # bag time (recording/timebase.py)
+        self._writer.write(conn, log_ns, data)
+        for listener in self._listeners:
+            listener(conn, log_ns, data)
         self.message_counts[topic.name] = self.message_counts.get(topic.name, 0) + 1
         self.byte_counts[topic.name] = self.byte_counts.get(topic.name, 0) + len(data)
 
@@ -360,6 +380,7 @@ class NullWriter(RecordingWriter):
     def __init__(self) -> None:
         self.message_counts, self.byte_counts, self.flushes = {}, {}, 0
         self.epoch_ns = 0
+        self._listeners = []  # (never called: nothing is written)
 
     def __enter__(self) -> NullWriter:
         return self

@@ -20,7 +20,7 @@ One physics step at a time (``world.physics_hz``); every rate is a whole number 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -42,7 +42,7 @@ from simlan_data.errors import PluginError
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import messages as M
 from simlan_data.recording.cameras import camera_from_messages
-from simlan_data.recording.writer import NullWriter, RecordingWriter
+from simlan_data.recording.writer import NullWriter, RecordingWriter, WriteListener
 from simlan_data.sim.agent_base import CollisionReading
 from simlan_data.sim.birdseye_live import BirdseyeRecorder
 from simlan_data.sim.camera_recording import CameraRecorder
@@ -128,11 +128,13 @@ class Simulation:
         *,
         progress: Callable[[float], None] | None = None,
         stop: Callable[[], bool] | None = None,
+        listeners: Sequence[WriteListener] = (),
     ) -> RunStats:
         """Simulate ``duration_s`` and write the bag at ``bag_path`` (which must not exist).
 
         ``stop()`` is asked at every step boundary; once it says yes the loop ends there and the
-        recording is finished as after a complete run (``stats.stopped_early``).
+        recording is finished as after a complete run (``stats.stopped_early``). ``listeners``
+        get every message the recording writes (``RecordingWriter.add_listener``: a live view).
         """
         cfg = self.cfg
         stats = RunStats(
@@ -156,6 +158,8 @@ class Simulation:
                 if cfg.recording.enabled
                 else NullWriter()
             )
+            for listener in listeners:
+                writer.add_listener(listener)
             with writer:
                 for key, value in (
                     ("format_version", FORMAT_VERSION),
