@@ -26,7 +26,7 @@ MOTIONS_DIR = ASSETS_DIR / "motions"
 
 # Recording format. Bump the minor for additive changes (new topics), the major when a reader of
 # the previous major cannot interpret a recording any more.
-FORMAT_VERSION = "1.1"  # 1.1: SafetyEvent.namespace renamed robot (same CDR bytes; a C++ keyword)
+FORMAT_VERSION = "1.1"  # 1.1: SafetyEvent.robot (was namespace, same bytes), ground_truth/<ns>/base_link frames, bag time = sim time + simlan.epoch_ns
 FORMAT_MAJOR = 1
 
 # Run directory layout (hydra.run.dir):
