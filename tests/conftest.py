@@ -52,6 +52,7 @@ def short_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
         "recording.semantic_rate_hz=5",
     )
     assert proc.returncode == 0, proc.stderr
+    (run_dir.parent / "default_short.stdout").write_text(proc.stdout)  # (what the console showed)
     return run_dir
 
 

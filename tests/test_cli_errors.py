@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import logging
 import shutil
 from pathlib import Path
 
@@ -157,22 +158,24 @@ def test_config_checks_without_a_process() -> None:
 
 
 def test_the_summary_notes_calibration_disagreements_of_the_users_files_only(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path
+    caplog: pytest.LogCaptureFixture, tmp_path: Path
 ) -> None:
     """The packaged calibrations' stale derived fields are known (docs/twin.md): no 'note' on
     every run; a user's calibration directory with disagreements gets the line."""
-    from simlan_data.apps.run import print_summary
+    from simlan_data.apps.run import log_summary
     from simlan_data.sim.simulation import RunStats
 
+    caplog.set_level(logging.INFO, logger="simlan_data")
     metrics = {"recording.messages": 1.0, "sim.duration_s": 1.0, "sim.wall_s": 1.0, "sim.rtf": 1.0}
     stats = RunStats(calibration_issues=["160.yaml: position disagrees with -R^T t by 0.010 m"])
-    print_summary(to_config(compose_config("duration_s=1")), stats, metrics, tmp_path)
-    assert "calibration fields disagree" not in capsys.readouterr().out
+    log_summary(to_config(compose_config("duration_s=1")), stats, metrics, tmp_path)
+    assert "finished" in caplog.text and "calibration fields disagree" not in caplog.text
+    caplog.clear()
     shutil.copytree(CALIBRATION_DIR, tmp_path / "mine")
-    print_summary(
+    log_summary(
         to_config(compose_config(f"cameras.calibration_dir={tmp_path / 'mine'}")), stats, metrics, tmp_path
     )
-    assert "1 calibration fields disagree with K, R, t (listed in report.md)" in capsys.readouterr().out
+    assert "1 calibration fields disagree with K, R, t (listed in report.md)" in caplog.text
 
 
 def test_the_seed_sweep_example_gives_different_runs() -> None:
@@ -190,16 +193,18 @@ def test_the_seed_sweep_example_gives_different_runs() -> None:
 
 
 def test_the_summary_says_when_no_camera_ever_saw_a_robot(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path
+    caplog: pytest.LogCaptureFixture, tmp_path: Path
 ) -> None:
-    from simlan_data.apps.run import print_summary
+    from simlan_data.apps.run import log_summary
     from simlan_data.sim.simulation import RunStats
 
+    caplog.set_level(logging.INFO, logger="simlan_data")
     metrics = {"recording.messages": 1.0, "sim.duration_s": 1.0, "sim.wall_s": 1.0, "sim.rtf": 1.0}
     stats = RunStats(collisions={"robot_agent_1": 0})
     cfg = to_config(compose_config("duration_s=1"))
-    print_summary(cfg, stats, metrics | {"localization.robot_agent_1.availability": 0.4}, tmp_path)
-    assert "never seen" not in capsys.readouterr().out
-    print_summary(cfg, stats, metrics | {"localization.robot_agent_1.availability": 0.0}, tmp_path)
-    notes = [ln for ln in capsys.readouterr().out.splitlines() if "never seen by a camera" in ln]
+    log_summary(cfg, stats, metrics | {"localization.robot_agent_1.availability": 0.4}, tmp_path)
+    assert "finished" in caplog.text and "never seen" not in caplog.text
+    caplog.clear()
+    log_summary(cfg, stats, metrics | {"localization.robot_agent_1.availability": 0.0}, tmp_path)
+    notes = [ln for ln in caplog.text.splitlines() if "never seen by a camera" in ln]
     assert notes == [notes[0]] and "robot_agent_1" in notes[0]

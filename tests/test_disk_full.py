@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from conftest import run_cli
+from simlan_data.evaluation.report_figures import ERROR_FILENAME, TIMELINE_FILENAME, TRAJECTORIES_FILENAME
 
 RUN_ARGS = ("duration_s=1", "cameras=single", "world.fidelity=empty", "progress=false")  # a quick run
 
@@ -62,6 +63,9 @@ def _one_error_line(stderr: str) -> str:
     return lines[0]
 
 
+FIGURES = (TRAJECTORIES_FILENAME, ERROR_FILENAME, TIMELINE_FILENAME)
+
+
 def test_disk_full_at_start_is_a_failed_run_not_a_bad_config(tmpfs: Path) -> None:
     _fill(tmpfs, 0)
     run_dir = tmpfs / "run"
@@ -82,8 +86,10 @@ def test_disk_full_while_writing_the_report_names_what_was_kept(tmpfs: Path) -> 
     proc = run_cli(*RUN_ARGS, f"hydra.run.dir={first}", timeout=60)
     assert proc.returncode == 0, proc.stderr
     mosaic = first / "report_cameras.png"
-    report_bytes = sum(
-        -(-(first / name).stat().st_size // 4096) * 4096 for name in ("report_cameras.png", "report.md")
+    report_bytes = sum(  # (the figures come after the mosaic)
+        -(-(first / name).stat().st_size // 4096) * 4096
+        for name in ("report_cameras.png", "report.md", *FIGURES)
+        if (first / name).exists()
     )
     before_report = free0 - _free_bytes(tmpfs) - report_bytes
     half_mosaic = mosaic.stat().st_size // 2

@@ -249,3 +249,28 @@ def test_bad_counterfactual_zone_gets_one_line_and_exit_2(safety_run: Path, tmp_
         "zone 'x' is not a simple polygon (Self-intersection[1 1]); list the corners in order around the area, "
         "without crossing edges"
     ]
+
+
+def _pinkish(image_bgr: np.ndarray) -> int:
+    """Pixels of a light red wash (a zone's fill, a stop's shading): red above equal green and blue."""
+    b, g, r = (image_bgr[..., k].astype(int) for k in range(3))
+    return int(((r - g >= 15) & (r - g <= 80) & (np.abs(g - b) <= 8)).sum())
+
+
+def test_the_report_shows_the_notes_the_zone_and_the_stops(safety_run: Path) -> None:
+    """report.md of a run with safety events: what went wrong at the top, the zone on the map,
+    each robot's stop shaded on its speed timeline."""
+    import cv2
+
+    from simlan_data.evaluation.report_figures import DPI, TIMELINE_FILENAME, TRAJECTORIES_FILENAME
+
+    report = (safety_run / "report.md").read_text()
+    top = report[: report.index("## Figures")]
+    assert "robot_agent_1 reached 0 of 1 goals" in top and "robot_agent_2 reached 0 of 1 goals" in top
+    assert "| safety stops | 2 | count |" in top
+    assert "![trajectories](report_trajectories.png)" in report
+    assert _pinkish(cv2.imread(str(safety_run / TRAJECTORIES_FILENAME))) > 2000  # the bay
+    timeline = cv2.imread(str(safety_run / TIMELINE_FILENAME))
+    assert timeline.shape[0] == (1 + 2 * 3) * DPI  # a row per moving agent: the truck, the Jackal, the person
+    rows = np.array_split(timeline, [int(timeline.shape[0] * f) for f in (0.4, 0.7)], axis=0)
+    assert [_pinkish(r) > 500 for r in rows] == [True, True, False], [_pinkish(r) for r in rows]

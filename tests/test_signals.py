@@ -58,6 +58,8 @@ def test_a_signal_stops_the_run_and_finalizes_everything_it_recorded(
 
     lines = _stderr(run_dir)
     assert len(lines) == 1 and lines[0].startswith(f"error: interrupted by {sig.name} in {run_dir}"), lines
+    logged = (run_dir / "run.log").read_text()  # Hydra's job log has the error line too
+    assert f"[ERROR] - {lines[0].removeprefix('error: ')}" in logged
     # the bag is complete: the independent reader finds its summary (footer) and validates CRCs
     with mcap_file(bag).open("rb") as f:
         summary = make_reader(f).get_summary()

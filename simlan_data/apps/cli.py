@@ -134,7 +134,17 @@ def survivors(path: Path) -> list[str]:
     return []
 
 
+def log_to_open_files(message: str, level: int = logging.ERROR) -> None:
+    """``message`` also into the log files a run has opened (Hydra's run.log): a run refused
+    before it logged anything (a bad config, a directory in use) opened none and writes none."""
+    record = log.makeRecord(log.name, level, __file__, 0, message, (), None)
+    for handler in logging.getLogger().handlers:
+        if isinstance(handler, logging.FileHandler) and handler.stream is not None:
+            handler.handle(record)
+
+
 def fail(message: str, code: int) -> NoReturn:
+    log_to_open_files(message)
     sys.stderr.write(f"error: {message}\n")
     sys.stderr.flush()
     raise SystemExit(code)

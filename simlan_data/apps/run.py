@@ -42,7 +42,10 @@ if TYPE_CHECKING:
 # The simulator, the recorder's reader, OpenCV and the evaluation are imported where a run needs
 # them, not here: `--help` and a config error then answer without loading them (issue 22).
 
-log = logging.getLogger("simlan_data.run")
+# Messages go through logging: Hydra's job logging writes them to the console (as plain lines) and
+# to the run's `run.log`; DEBUG records (start, progress, timings) to `run.log` only (conf/config.yaml).
+log = logging.getLogger(__name__)
+PROGRESS_LOG_STEP = 0.1  # run.log gets a progress line every tenth of the simulated time
 
 
 def execute(
@@ -82,6 +85,20 @@ def execute(
     running = RunMarker.for_this_process(cfg.duration_s)
     write_running(run_dir, running)
     sim = Simulation(cfg, inputs, config_yaml=config_yaml)
+    log.debug(
+        "scenario '%s' starting: %g s simulated, cameras %s (%dx%d at %g Hz), agents %s, seed %d, run directory %s",
+        cfg.scenario.name,
+        cfg.duration_s,
+        ", ".join(str(c) for c in cfg.cameras.ids),
+        cfg.cameras.width,
+        cfg.cameras.height,
+        cfg.cameras.rate_hz,
+        ", ".join(sorted(cfg.agents)),
+        cfg.seed,
+        run_dir,
+    )
+    logged = [0.0]  # simulated seconds of the last progress line in run.log
+    wall0 = time.monotonic()
     bar = tqdm(
         total=round(cfg.duration_s, 3),
         unit="sim s",
@@ -94,6 +111,9 @@ def execute(
         if live is not None:
             live.pace(t_s)
         bar.update(round(t_s - bar.n, 6))
+        if t_s - logged[0] >= PROGRESS_LOG_STEP * cfg.duration_s - 1e-9 or t_s >= cfg.duration_s:
+            logged[0] = t_s
+            log.debug("simulated %.1f of %g s in %.1f s wall", t_s, cfg.duration_s, time.monotonic() - wall0)
         # how far the clock got: after a crash, recovery compares it with what the file holds
         write_running(run_dir, replace(running, simulated_s=round(t_s, 9)))
 
@@ -146,11 +166,20 @@ def execute(
             metrics.update(recording_metrics(reader, ctx.config, ctx.cameras))
             metrics.update(recording_safety_metrics(reader, ctx.config, ctx.cameras))
             write_metrics(run_dir / METRICS_FILENAME, metrics)
-            write_report(run_dir, cfg, stats, metrics, reader)
+            write_report(
+                run_dir,
+                cfg,
+                stats,
+                metrics,
+                reader,
+                config=ctx.config,
+                cameras=ctx.cameras,
+                floor=inputs.grid,
+            )
     else:
         write_metrics(run_dir / METRICS_FILENAME, metrics)
     if not stats.stopped_early:  # (an interrupted run says so in its one error line)
-        print_summary(cfg, stats, metrics, run_dir)
+        log_summary(cfg, stats, metrics, run_dir)
     return metrics
 
 
@@ -172,7 +201,8 @@ def start_live_view(cfg: Config, run_dir: Path) -> LiveView | None:
     return live
 
 
-def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_dir: Path) -> None:
+def log_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_dir: Path) -> None:
+    """The run's summary (console and run.log): where its files are, what it measured, notes."""
     bag = run_dir / RECORDING_DIRNAME
     mib = stats.recording_bytes / 2**20
     streams = "+".join(cfg.cameras.streams)
@@ -195,19 +225,17 @@ def print_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_d
         lines.append(
             f"  {ns:<14} {nav}{stats.collisions[ns]} collisions, {stats.distance_m.get(ns, 0.0):.1f} m driven{loc}"
         )
-    unseen = [ns for ns in sorted(stats.collisions) if metrics.get(f"localization.{ns}.availability") == 0.0]
-    if unseen:  # a camera-steered run whose robot no camera saw: its results mean little
-        lines.append(
-            f"  note           never seen by a camera: {', '.join(unseen)} (no marker detection in the whole "
-            "run; check cameras.ids against where the robot drives)"
-        )
-    # the packaged calibrations' stale derived fields are known (docs/twin.md): a user's files only
-    if stats.calibration_issues and cfg.cameras.calibration_dir:
-        lines.append(
-            f"  note           {len(stats.calibration_issues)} calibration fields disagree with K, R, t (listed in report.md)"
-        )
+    from simlan_data.evaluation.run_notes import run_notes
+
+    notes = run_notes(
+        metrics,
+        stats.collisions,
+        calibration_issues=len(stats.calibration_issues),
+        user_calibration=bool(cfg.cameras.calibration_dir),
+    )
+    lines += [f"  note           {n.text}" for n in notes if n.in_summary]  # (report.md has them all)
     lines.append(f"  next           python -m simlan_data.replay {bag} --info")
-    print("\n".join(lines), flush=True)
+    log.info("\n".join(lines))
 
 
 def job_cpu_share(hydra_cfg: Any, cpu_count: int | None = None) -> int:
