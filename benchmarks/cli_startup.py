@@ -5,7 +5,8 @@
 Median wall time (process start to exit, ``--repeat`` times each, interleaved) of:
 
 - a bare Hydra app's ``--help`` (``@hydra.main`` with no config: the floor for a Hydra CLI);
-- ``python -m simlan_data.run --help``;
+- ``python -m simlan_data.run --help``: the first one (an empty help cache: composed, then
+  stored) and a later one (served from the cache, ``simlan_data.apps.help_cache``);
 - a config error: ``duration_s=abc`` (a bad value) and ``durration_s=1`` (a typo'd key), exit 2.
 
 ``--src DIR`` also times another checkout (e.g. ``git worktree add /tmp/old <commit>``) with this
@@ -17,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -39,7 +41,8 @@ if __name__ == "__main__":
     app()
 """
 CASES = {
-    "--help": (["--help"], 0),
+    "--help (first: composed)": (["--help"], 0),
+    "--help (later: cached)": (["--help"], 0),
     "config error: duration_s=abc": (["duration_s=abc"], 2),
     "config error: durration_s=1 (typo'd key)": (["durration_s=1"], 2),
 }
@@ -78,7 +81,13 @@ def main() -> None:
                     cmd = [sys.executable, "-m", "simlan_data.run", *argv, f"hydra.run.dir={tmp}/never"]
                     if argv == ["--help"]:
                         cmd = cmd[:-1]
-                    times.setdefault((label, case), []).append(_time(cmd, tree, tree_env, want))
+                    cache = Path(tmp) / label.replace("/", "_") / ("warm" if "cached" in case else "cold")
+                    if "first" in case:
+                        shutil.rmtree(cache, ignore_errors=True)
+                    elif "cached" in case and not cache.exists():
+                        _time(cmd, tree, tree_env | {"SIMLAN_DATA_CACHE_DIR": str(cache)}, want)  # fill it
+                    case_env = tree_env | {"SIMLAN_DATA_CACHE_DIR": str(cache)}
+                    times.setdefault((label, case), []).append(_time(cmd, tree, case_env, want))
     rows = [
         {
             "code": label,

@@ -9,6 +9,12 @@ if __name__ == "__main__":  # SIGTERM while the app is imported: one line, exit 
     from simlan_data.apps.signals import exit_on_early_signal
 
     exit_on_early_signal()
+    import sys
+
+    from simlan_data.apps.help_cache import serve_cached_help
+
+    if serve_cached_help(sys.argv[1:]):  # --help in 0.1 s, before the app's imports
+        sys.exit(0)
 
 from simlan_data.apps.run import cli, main
 

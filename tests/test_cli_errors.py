@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import os
 import shutil
 from pathlib import Path
 
@@ -126,13 +127,39 @@ def test_existing_recording_is_never_touched(tmp_path: Path) -> None:
     assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml"]
 
 
-def test_fast_help_is_hydras_help_word_for_word() -> None:
-    """``--help`` is composed once by simlan_data.apps.help; with a config directory on the
-    command line Hydra renders its own: the two texts must be the same."""
-    ours = run_cli("--help", "duration_s=7")
-    hydras = run_cli("--help", "duration_s=7", "--config-dir", str(CONF_DIR))
-    assert ours.returncode == hydras.returncode == 0, (ours.stderr, hydras.stderr)
-    assert ours.stdout == hydras.stdout and "duration_s: 7.0" in ours.stdout
+def test_fast_help_is_hydras_help_word_for_word(tmp_path: Path) -> None:
+    """``--help`` is composed once by simlan_data.apps.help, then served from its cache; with a
+    config directory on the command line Hydra renders its own: the three texts must be the same."""
+    env = {"SIMLAN_DATA_CACHE_DIR": str(tmp_path)}
+    ours = run_cli("--help", "duration_s=7", env=env)
+    cached = run_cli("--help", "duration_s=7", env=env)
+    hydras = run_cli("--help", "duration_s=7", "--config-dir", str(CONF_DIR), env=env)
+    assert ours.returncode == cached.returncode == hydras.returncode == 0, (ours.stderr, hydras.stderr)
+    assert ours.stdout == cached.stdout == hydras.stdout and "duration_s: 7.0" in ours.stdout
+    assert len(list((tmp_path / "help").glob("*.txt"))) == 1  # (Hydra's own help is not cached)
+
+
+def test_help_cache_is_used_and_a_changed_config_file_invalidates_it(tmp_path: Path) -> None:
+    """The second --help prints the stored text (planted here to tell it apart); touching a
+    config file the help is made of, or asking for another config, composes it again."""
+    env = {"SIMLAN_DATA_CACHE_DIR": str(tmp_path)}
+    assert run_cli("--help", env=env).returncode == 0
+    (stored,) = (tmp_path / "help").glob("*.txt")
+    stored.write_text("PLANTED\n")
+    assert run_cli("--help", env=env).stdout == "PLANTED\n"
+    assert run_cli("-h", env=env).stdout == "PLANTED\n"
+    assert "duration_s: 3.0" in run_cli("--help", "duration_s=3", env=env).stdout
+    config_yaml = CONF_DIR / "config.yaml"
+    st = config_yaml.stat()
+    try:
+        os.utime(config_yaml, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000_000))
+        fresh = run_cli("--help", env=env)
+    finally:
+        os.utime(config_yaml, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert fresh.returncode == 0 and "PLANTED" not in fresh.stdout and "duration_s" in fresh.stdout
+    unwritable = tmp_path / "file"
+    unwritable.write_text("")  # a cache "directory" that is a file: help still works
+    assert "duration_s" in run_cli("--help", env={"SIMLAN_DATA_CACHE_DIR": str(unwritable)}).stdout
 
 
 def test_help_lists_groups_and_keys() -> None:

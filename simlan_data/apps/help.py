@@ -6,40 +6,23 @@ about 120 copies, 2 s of the 2.2 s the command took. Here the groups come from t
 directory and the ConfigStore directly, and the config is composed once, as the run composes it;
 the text is Hydra's template (``conf/hydra/help/simlan.yaml``) with the same substitutions.
 A command line that adds config directories (``--config-dir``, ``hydra.searchpath``) or asks for
-Hydra's options (``--hydra-help``) gets Hydra's own help.
+Hydra's options (``--hydra-help``) gets Hydra's own help. The text is kept in a cache that the
+``-m`` shim and ``simlan-run`` print before importing the app (:mod:`simlan_data.apps.help_cache`).
 """
 
 from __future__ import annotations
 
 import string
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from simlan_data.apps.help_cache import help_overrides, store_help, wants_fast_help
 from simlan_data.constants import CONF_DIR
 
-HELP_FLAGS = ("--help", "-h")
-
-
-def wants_fast_help(argv: Sequence[str]) -> bool:
-    """``--help`` with nothing that changes where configs come from."""
-    if not any(a in HELP_FLAGS for a in argv):
-        return False
-    other = (
-        "--hydra-help",
-        "--config-dir",
-        "-cd",
-        "--config-path",
-        "-cp",
-        "--config-name",
-        "-cn",
-        "-m",
-        "--multirun",
-    )
-    return not any(a in other or a.startswith(other) for a in argv) and not any(
-        a.lstrip("+~").startswith("hydra.searchpath") for a in argv
-    )
+__all__ = ["config_groups", "help_text", "print_help", "wants_fast_help"]
 
 
 def config_groups(conf_dir: Path = CONF_DIR) -> dict[str, list[str]]:
@@ -84,4 +67,7 @@ def help_text(overrides: Sequence[str]) -> str:
 
 
 def print_help(argv: Sequence[str]) -> None:
-    print(help_text([a for a in argv if a not in HELP_FLAGS and not a.startswith("-")]))
+    """Compose the help, print it, and keep it for the next ``--help`` (help_cache)."""
+    text = help_text(help_overrides(argv)) + "\n"
+    sys.stdout.write(text)
+    store_help(argv, text)
