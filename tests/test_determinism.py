@@ -216,7 +216,7 @@ def _encode_jobs(frames: list, pool: ThreadPoolExecutor | None) -> list[bytes | 
     threads as the writer runs them (serially without a pool)."""
     recorder = CameraRecorder(
         None,  # type: ignore[arg-type]  # (encoding only: nothing is written)
-        RecordingConfig(),
+        RecordingConfig(depth_encoding="png"),  # (compressedDepth: the PNG deflate is what can differ)
         ["rgb", "depth", "semantic"],
         depth_every=1,
         semantic_every=1,

@@ -15,6 +15,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from conftest import run_cli
 from simlan_data.constants import FORMAT_VERSION
+from simlan_data.recording.codecs import decode_compressed
 from simlan_data.recording.timebase import DEFAULT_EPOCH_NS
 
 CAMERAS = [str(c) for c in range(160, 171)]
@@ -63,7 +64,7 @@ def test_every_topic_is_present(bag: dict[str, list]) -> None:
         expected |= {
             f"/camera_{cid}/image_raw/compressed",
             f"/camera_{cid}/camera_info",
-            f"/camera_{cid}/depth/image_raw/compressedDepth",
+            f"/camera_{cid}/depth/image_raw",
             f"/camera_{cid}/semantic/image_raw/compressed",
         }
     assert expected <= set(bag), expected - set(bag)
@@ -91,15 +92,15 @@ def test_camera_streams_decode_to_sane_images(bag: dict[str, list]) -> None:
     _, rgb_msg = bag["/camera_163/image_raw/compressed"][0]
     rgb = cv2.imdecode(np.frombuffer(bytes(rgb_msg.data), np.uint8), cv2.IMREAD_COLOR)
     assert rgb.shape == (540, 960, 3) and rgb.std() > 10
-    _, depth_msg = bag["/camera_163/depth/image_raw/compressedDepth"][0]
-    assert depth_msg.format == "16UC1; compressedDepth png"
-    depth_mm = cv2.imdecode(np.frombuffer(bytes(depth_msg.data)[12:], np.uint8), cv2.IMREAD_UNCHANGED)
-    assert depth_mm.dtype == np.uint16 and depth_mm.shape == (540, 960)
+    _, depth_msg = bag["/camera_163/depth/image_raw"][0]
+    assert (depth_msg.encoding, depth_msg.is_bigendian, depth_msg.step) == ("16UC1", 0, 2 * 960)
+    depth_mm = np.frombuffer(bytes(depth_msg.data), "<u2").reshape(depth_msg.height, depth_msg.width)
+    assert depth_mm.shape == (540, 960)
     valid = depth_mm > 0
     assert 0.7 < valid.mean() < 0.97  # the distortion vignette has no depth
     assert 4000 < np.median(depth_mm[valid]) < 20000  # camera 7.3 m up, looking down the aisle
     _, sem_msg = bag["/camera_163/semantic/image_raw/compressed"][0]
-    labels = cv2.imdecode(np.frombuffer(bytes(sem_msg.data), np.uint8), cv2.IMREAD_UNCHANGED)
+    labels = decode_compressed(sem_msg.format, sem_msg.data)  # (the palette PNG's indices)
     names = dict(zip(bag["/simlan/semantic_labels"][0][1].ids, bag["/simlan/semantic_labels"][0][1].names))
     present = {names[i] for i in np.unique(labels)}
     assert {"floor", "shelf", "box"} <= present
@@ -109,7 +110,7 @@ def test_truck_is_labelled_51_where_it_is_seen(bag: dict[str, list]) -> None:
     truck_pixels = 0
     for cid in ("160", "161"):
         for _, msg in bag[f"/camera_{cid}/semantic/image_raw/compressed"]:
-            labels = cv2.imdecode(np.frombuffer(bytes(msg.data), np.uint8), cv2.IMREAD_UNCHANGED)
+            labels = decode_compressed(msg.format, msg.data)
             truck_pixels += int((labels == 51).sum())
     assert truck_pixels > 1000
 
@@ -152,4 +153,4 @@ def test_replay_info_prints_a_summary(short_run: Path) -> None:
     proc = run_cli(str(short_run / "recording"), "--info", module="simlan_data.replay")
     assert proc.returncode == 0, proc.stderr
     assert "Topic: /camera_163/image_raw/compressed" in proc.stdout
-    assert "Format version:    1.0" in proc.stdout
+    assert "Format version:    1.1" in proc.stdout

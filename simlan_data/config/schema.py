@@ -30,7 +30,7 @@ from simlan_data.world.physics import PhysicsParams
 NAMESPACE_RE = re.compile(r"^robot_agent_(0|[1-9]\d*)$")  # one spelling per number
 STREAMS = ("rgb", "depth", "semantic")
 RGB_ENCODINGS = ("jpeg", "png", "raw")
-DEPTH_ENCODINGS = ("png", "raw")
+DEPTH_ENCODINGS = ("16UC1", "png", "raw")  # 16UC1 Image mm | compressedDepth PNG mm | 32FC1 Image m
 SEMANTIC_ENCODINGS = ("png", "raw")
 CHUNK_COMPRESSIONS = ("zstd", "none")
 CALIBRATION_CHECKS = ("warn", "error")
@@ -202,7 +202,7 @@ class RecordingConfig:
     enabled: bool = True
     rgb_encoding: str = "jpeg"
     jpeg_quality: int = 85
-    depth_encoding: str = "png"
+    depth_encoding: str = "16UC1"
     semantic_encoding: str = "png"
     depth_rate_hz: float = 1.0
     semantic_rate_hz: float = 1.0

@@ -2,9 +2,23 @@
 
 - colour: ``sensor_msgs/CompressedImage`` with format ``"rgb8; jpeg compressed bgr8"`` or
   ``"rgb8; png compressed bgr8"`` (image_transport's compressed plugin), or raw ``rgb8``;
-- depth: ``"16UC1; compressedDepth png"`` (compressed_depth_image_transport: a 12-byte config
-  header, then a 16-bit PNG of millimetres; 0 = no return), or raw ``32FC1`` metres;
-- semantic labels: ``"mono8; png compressed mono8"``, or raw ``mono8``.
+- depth (``recording.depth_encoding``): ``16UC1`` (default: a ``sensor_msgs/Image`` of uint16
+  millimetres, 0 = no return, REP 118), ``png`` (``"16UC1; compressedDepth png"``:
+  compressed_depth_image_transport's 12-byte config header, then a 16-bit PNG of millimetres;
+  0 = no return), or ``raw`` (``32FC1`` metres, NaN = no return, REP 118);
+- semantic labels: a PNG with a palette (``"rgb8; png compressed bgr8"``): its pixel values are
+  the class ids, its palette the class colours of ``world/labels.py``; or raw ``mono8`` ids.
+
+Why these (docs/recording.md, "Images"): Foxglove's Image panel and Rerun decode neither
+compressedDepth (a header before the PNG) nor 16-bit PNGs as numbers (a browser decodes PNGs to
+8 bits); Foxglove colour-maps ``16UC1``/``mono16`` images with a value range, and shows ``32FC1``
+as grey with 1.0 as white (metres beyond 1 m saturate). A palette PNG is any PNG decoder's colour
+image (a viewer shows the classes in their colours; image_transport's compressed subscriber gives
+``rgb8``: hence the format) while a reader of the indices gets the ids back losslessly
+(:func:`decode_compressed`; OpenCV alone would give the colours).
+
+Decoded depth follows the in-process convention of ``CameraImages.depth_m`` whatever the
+encoding: float32 metres, 0 = no return.
 """
 
 from __future__ import annotations
@@ -17,11 +31,16 @@ from isal import isal_zlib
 from numpy.typing import NDArray
 
 from simlan_data.errors import RecordingInputError
+from simlan_data.world.labels import label_palette
 
 JPEG_FORMAT = "rgb8; jpeg compressed bgr8"
 PNG_RGB_FORMAT = "rgb8; png compressed bgr8"
 DEPTH_FORMAT = "16UC1; compressedDepth png"
-LABELS_FORMAT = "mono8; png compressed mono8"
+# semantic labels: a palette PNG (indices: class ids); ROS decoders give its colours, as rgb8
+LABELS_FORMAT = "rgb8; png compressed bgr8"
+MONO_LABELS_FORMAT = "mono8; png compressed mono8"  # labels in recordings before the palette
+DEPTH_16UC1 = "16UC1"  # sensor_msgs/Image encodings of the raw depth options
+DEPTH_32FC1 = "32FC1"
 DEPTH_HEADER = struct.Struct("<iff")  # compressionFormat (INV_DEPTH = 0), depthParam[2]
 # PNGs are written here, not by OpenCV: libpng deflates with zlib, whose level 1 spends 8 ms on a
 # 960x540 16-bit depth frame; ISA-L's level 1 (python-isal) gave the same size in 1.9 ms (the
@@ -88,23 +107,57 @@ def png_filtered(image: NDArray[np.uint8] | NDArray[np.uint16]) -> NDArray[np.ui
     return filtered
 
 
-def png_file(image: np.ndarray, idat: bytes) -> bytes:
-    """The PNG file of ``image`` (checked by :func:`png_filtered`) around its zlib stream ``idat``."""
+PNG_GREY, PNG_RGB, PNG_PALETTE = 0, 2, 3  # IHDR colour types
+
+
+def png_file(image: np.ndarray, idat: bytes, *, palette: NDArray[np.uint8] | None = None) -> bytes:
+    """The PNG file of ``image`` (checked by :func:`png_filtered`) around its zlib stream ``idat``;
+    with ``palette`` (N x 3 uint8 RGB, N <= 256) an indexed-colour PNG whose indices are the
+    pixels of ``image`` (HxW uint8)."""
     height, width = image.shape[:2]
-    colour_type = 2 if image.ndim == 3 else 0
+    chunks = []
+    if palette is not None:
+        if (
+            image.ndim != 2
+            or image.dtype != np.uint8
+            or palette.shape[1:] != (3,)
+            or not 0 < len(palette) <= 256
+        ):
+            raise ValueError(
+                f"no palette PNG of a {image.dtype} {image.shape} image with a {palette.shape} palette"
+            )
+        if image.size and int(image.max()) >= len(palette):
+            raise ValueError(f"index {int(image.max())} beyond a palette of {len(palette)} colours")
+        colour_type = PNG_PALETTE
+        chunks.append(_png_chunk(b"PLTE", np.ascontiguousarray(palette, dtype=np.uint8).tobytes()))
+    else:
+        colour_type = PNG_RGB if image.ndim == 3 else PNG_GREY
     header = struct.pack(">IIBBBBB", width, height, 8 * image.itemsize, colour_type, 0, 0, 0)
     return b"".join(
-        (PNG_SIGNATURE, _png_chunk(b"IHDR", header), _png_chunk(b"IDAT", idat), _png_chunk(b"IEND", b""))
+        (
+            PNG_SIGNATURE,
+            _png_chunk(b"IHDR", header),
+            *chunks,
+            _png_chunk(b"IDAT", idat),
+            _png_chunk(b"IEND", b""),
+        )
     )
 
 
-def encode_png(image: NDArray[np.uint8] | NDArray[np.uint16], *, level: int = PNG_LEVEL) -> bytes:
+def encode_png(
+    image: NDArray[np.uint8] | NDArray[np.uint16],
+    *,
+    level: int = PNG_LEVEL,
+    palette: NDArray[np.uint8] | None = None,
+) -> bytes:
     """A PNG of a grey (HxW, uint8 or uint16) or RGB (HxWx3, uint8) image; decodes to ``image``.
+    With ``palette``, the indexed-colour PNG of a HxW uint8 image of indices (see :func:`png_file`).
 
     Raises:
-        ValueError: another shape or dtype, or an empty image (PNG has no 0-pixel images).
+        ValueError: another shape or dtype, or an empty image (PNG has no 0-pixel images), or
+            an index beyond the palette.
     """
-    return png_file(image, isal_zlib.compress(png_filtered(image), level))
+    return png_file(image, isal_zlib.compress(png_filtered(image), level), palette=palette)
 
 
 MAX_DECODED_PIXELS = 8192 * 8192  # refuse decoding absurd images from untrusted recordings
@@ -146,8 +199,77 @@ def encode_depth(depth_m: NDArray[np.float32], *, level: int = PNG_LEVEL) -> tup
     return compressed_depth(encode_png(depth_to_mm(depth_m), level=level))
 
 
-def encode_labels(labels: NDArray[np.uint8], *, level: int = PNG_LEVEL) -> tuple[str, bytes]:
-    return LABELS_FORMAT, encode_png(labels, level=level)
+def depth_to_32fc1(depth_m: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Metres as a 32FC1 depth image holds them (REP 118): no return (0, negative, NaN,
+    infinite) is NaN. A new array; the in-process image (0 = no return) is left as it is."""
+    depth = np.asarray(depth_m, dtype=np.float32)
+    return np.where(np.isfinite(depth) & (depth > 0), depth, np.float32(np.nan)).astype(
+        np.float32, copy=False
+    )
+
+
+def raw_depth(depth_m: NDArray[np.float32], encoding: str) -> NDArray[np.float32] | NDArray[np.uint16]:
+    """The pixels of a raw depth image (``sensor_msgs/Image``) in ``encoding``: ``"16UC1"``
+    millimetres (0 = no return) or ``"32FC1"`` metres (NaN = no return)."""
+    if encoding == DEPTH_16UC1:
+        return depth_to_mm(depth_m)
+    if encoding == DEPTH_32FC1:
+        return depth_to_32fc1(depth_m)
+    raise ValueError(f"not a raw depth encoding: {encoding!r}")
+
+
+def encode_labels(
+    labels: NDArray[np.uint8], *, level: int = PNG_LEVEL, palette: NDArray[np.uint8] | None = None
+) -> tuple[str, bytes]:
+    """Encode class ids as a palette PNG: the indices are the ids, the palette the class colours
+    (``palette``, default :func:`~simlan_data.world.labels.label_palette`, extended with its
+    unknown-class colour when an id lies beyond it)."""
+    table = label_palette() if palette is None else palette
+    if labels.size and int(labels.max()) >= len(table):
+        table = np.concatenate([table, label_palette(int(labels.max()) + 1)[len(table) :]])
+    return LABELS_FORMAT, encode_png(labels, level=level, palette=table)
+
+
+def png_chunks(data: bytes) -> list[tuple[bytes, bytes]] | None:
+    """The (type, data) of every chunk of a PNG file; None if ``data`` is no well-formed PNG
+    (CRCs are left to the decoder)."""
+    if data[: len(PNG_SIGNATURE)] != PNG_SIGNATURE:
+        return None
+    out, pos = [], len(PNG_SIGNATURE)
+    while pos + 12 <= len(data):
+        (n,) = struct.unpack(">I", data[pos : pos + 4])
+        kind = data[pos + 4 : pos + 8]
+        if pos + 12 + n > len(data):
+            return None
+        out.append((kind, data[pos + 8 : pos + 8 + n]))
+        pos += 12 + n
+        if kind == b"IEND":
+            return out
+    return None
+
+
+def png_palette(data: bytes) -> NDArray[np.uint8] | None:
+    """The palette (N x 3 uint8 RGB) of an indexed-colour PNG, None for any other image."""
+    chunks = png_chunks(data)
+    if not chunks or chunks[0][0] != b"IHDR" or len(chunks[0][1]) != 13 or chunks[0][1][9] != PNG_PALETTE:
+        return None
+    plte = next((d for k, d in chunks if k == b"PLTE"), b"")
+    return np.frombuffer(plte[: len(plte) // 3 * 3], dtype=np.uint8).reshape(-1, 3).copy()
+
+
+def palette_indices_png(data: bytes) -> bytes | None:
+    """An indexed-colour PNG as a grey PNG of its indices (the same IDAT: a palette image's
+    samples are its indices), so that OpenCV decodes the indices instead of the colours; None
+    if ``data`` is no indexed-colour PNG."""
+    if data[25:26] != bytes([PNG_PALETTE]):  # IHDR's colour type (checked again below)
+        return None
+    chunks = png_chunks(data)
+    if not chunks or chunks[0][0] != b"IHDR" or len(chunks[0][1]) != 13 or chunks[0][1][9] != PNG_PALETTE:
+        return None
+    header = chunks[0][1]
+    parts = [PNG_SIGNATURE, _png_chunk(b"IHDR", header[:9] + bytes([PNG_GREY]) + header[10:])]
+    parts += [_png_chunk(k, d) for k, d in chunks[1:] if k not in (b"PLTE", b"tRNS")]
+    return b"".join(parts)
 
 
 def _imdecode(data: bytes | NDArray[np.uint8], flags: int, what: str) -> np.ndarray:
@@ -168,7 +290,13 @@ def _imdecode(data: bytes | NDArray[np.uint8], flags: int, what: str) -> np.ndar
 
 
 def decode_compressed(fmt: str, data: bytes | NDArray[np.uint8]) -> np.ndarray:
-    """Decode a CompressedImage by its format string: RGB uint8, depth float32 metres, or labels."""
+    """Decode a CompressedImage by its format string: RGB uint8, depth float32 metres (0 = no
+    return), or labels (HxW uint8 class ids: the indices of a palette PNG, whatever its format
+    string says, or a mono8 PNG's values)."""
+    if "png" in fmt and not fmt.startswith(("16UC1", "32FC1")):
+        indices = palette_indices_png(bytes(data) if not isinstance(data, np.ndarray) else data.tobytes())
+        if indices is not None:
+            return _imdecode(indices, cv2.IMREAD_UNCHANGED, "label image")
     if fmt.startswith(("16UC1; compressedDepth", "32FC1; compressedDepth")):
         raw = bytes(data) if not isinstance(data, np.ndarray) else data.tobytes()
         if len(raw) < DEPTH_HEADER.size:
@@ -199,7 +327,9 @@ def decode_compressed(fmt: str, data: bytes | NDArray[np.uint8]) -> np.ndarray:
 
 
 def decode_raw(encoding: str, height: int, width: int, step: int, data: NDArray[np.uint8]) -> np.ndarray:
-    """Decode a sensor_msgs/Image (rgb8, mono8, 32FC1, 16UC1)."""
+    """Decode a sensor_msgs/Image (rgb8, mono8, 32FC1, 16UC1). Depth (32FC1 metres, 16UC1
+    millimetres) comes back as float32 metres with 0 = no return: a 32FC1 image's NaN, infinite
+    or non-positive pixels (REP 118's "no return") are 0."""
     channels, dtype = {
         "rgb8": (3, np.uint8),
         "bgr8": (3, np.uint8),
@@ -231,4 +361,6 @@ def decode_raw(encoding: str, height: int, width: int, step: int, data: NDArray[
         image = image[..., ::-1].copy()
     if encoding == "16UC1":
         return image.astype(np.float32) / 1000.0
+    if encoding == "32FC1":
+        return np.where(np.isfinite(image) & (image > 0), image, np.float32(0.0)).astype(np.float32)
     return image

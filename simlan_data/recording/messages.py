@@ -145,12 +145,16 @@ def compressed_image(stamp_ns: int, frame_id: str, fmt: str, data: bytes) -> Any
 
 
 def raw_image(stamp_ns: int, frame_id: str, array: np.ndarray) -> Any:
-    """sensor_msgs/Image from rgb8 (H, W, 3) uint8, mono8 (H, W) uint8 or 32FC1 (H, W) float32."""
+    """sensor_msgs/Image from rgb8 (H, W, 3) uint8, mono8 (H, W) uint8, 16UC1 (H, W) uint16 or
+    32FC1 (H, W) float32 (little-endian)."""
     arr = np.ascontiguousarray(array)
     if arr.dtype == np.uint8 and arr.ndim == 3:
         encoding = "rgb8"
     elif arr.dtype == np.uint8:
         encoding = "mono8"
+    elif arr.dtype == np.uint16 and arr.ndim == 2:
+        encoding = "16UC1"
+        arr = np.ascontiguousarray(arr.astype("<u2", copy=False))
     elif arr.dtype == np.float32:
         encoding = "32FC1"
     else:

@@ -128,12 +128,18 @@ def camera_topics(
     }
     if depth is not None:
         out["depth"] = (
-            Topic(f"{base}/depth/image_raw", IMAGE_TYPE, "z-depth, 32FC1 metres, 0 = no return")
-            if depth == "raw"
-            else Topic(
+            Topic(
                 f"{base}/depth/image_raw/compressedDepth",
                 COMPRESSED_IMAGE_TYPE,
                 "z-depth, 16UC1 millimetres in PNG (compressed_depth_image_transport), 0 = no return",
+            )
+            if depth == "png"
+            else Topic(
+                f"{base}/depth/image_raw",
+                IMAGE_TYPE,
+                "z-depth, 32FC1 metres (REP 118), NaN = no return"
+                if depth == "raw"
+                else "z-depth, 16UC1 millimetres (REP 118), 0 = no return",
             )
         )
     out["pose_landmarks"] = Topic(
@@ -157,7 +163,8 @@ def camera_topics(
             else Topic(
                 f"{base}/semantic/image_raw/compressed",
                 COMPRESSED_IMAGE_TYPE,
-                "semantic class ids, mono8 PNG (see /simlan/semantic_labels)",
+                "semantic class ids as a palette PNG: pixel values = ids, palette = class colours "
+                "(names on /simlan/semantic_labels); OpenCV/image_transport decode it to rgb8 colours",
             )
         )
     return out

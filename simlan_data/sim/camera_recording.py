@@ -6,6 +6,11 @@ stays unchanged, later frames reuse those CDR bytes with a new header stamp (as 
 A changed image differs from the last one mostly in a few rows: each camera's colour and depth
 streams have their own encoder (``recording/incremental.py``) that encodes only those again.
 
+Depth is recorded as ``recording.depth_encoding`` says (``codecs``): a raw ``16UC1`` image of
+millimetres (the default), compressedDepth PNG (``png``) or raw ``32FC1`` metres (``raw``); the
+in-process ``depth_m`` (0 = no return) is converted here, at the recording's boundary (32FC1
+marks no return with NaN, REP 118). Semantic labels are a palette PNG (``png``) or raw mono8.
+
 With ``decode_gray`` the worker that JPEG-encodes a colour image also decodes it to grey, which
 is what the localizer searches (it sees what the bag holds): the simulation thread only waits
 for the result instead of decoding every searched image itself (about 1.5 ms each).
@@ -26,7 +31,7 @@ from simlan_data.config.schema import RecordingConfig
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import messages as M
 from simlan_data.recording import schema
-from simlan_data.recording.codecs import encode_labels
+from simlan_data.recording.codecs import DEPTH_16UC1, DEPTH_32FC1, encode_labels, raw_depth
 from simlan_data.recording.incremental import DepthStream, RgbStream
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.sim.rendering import CameraImages
@@ -38,6 +43,21 @@ class EncodedRgb(NamedTuple):
     format: str
     data: bytes
     gray: NDArray[np.uint8] | None = None
+
+
+# recording.depth_encoding -> the sensor_msgs/Image encoding of a raw depth option
+RAW_DEPTH = {"16UC1": DEPTH_16UC1, "raw": DEPTH_32FC1}
+
+
+def depth_topic(camera_id: str, encoding: str) -> schema.Topic:
+    """The depth topic of a camera for ``recording.depth_encoding``: ``16UC1`` and ``raw``
+    (32FC1) are sensor_msgs/Image on ``depth/image_raw``, ``png`` compressedDepth."""
+    return schema.camera_topics(camera_id, rgb="jpeg", depth=encoding, semantic=None)["depth"]
+
+
+def _raw_depth(stamp_ns: int, frame_id: str, encoding: str, depth_m: np.ndarray) -> Any:
+    """The sensor_msgs/Image of in-process depth (metres, 0 = no return) in ``encoding``."""
+    return M.raw_image(stamp_ns, frame_id, raw_depth(depth_m, encoding))
 
 
 def _compressed(stamp_ns: int, frame_id: str, encoded: Future[Any] | Any) -> Any:
@@ -87,12 +107,15 @@ class CameraRecorder:
     def topics(self, camera_id: str) -> dict[str, schema.Topic]:
         if camera_id not in self._topics:
             rec = self.rec
-            self._topics[camera_id] = schema.camera_topics(
+            topics = schema.camera_topics(
                 camera_id,
                 rgb=rec.rgb_encoding,
                 depth=rec.depth_encoding if "depth" in self._streams else None,
                 semantic=rec.semantic_encoding if "semantic" in self._streams else None,
             )
+            if "depth" in topics:
+                topics["depth"] = depth_topic(camera_id, rec.depth_encoding)
+            self._topics[camera_id] = topics
         return self._topics[camera_id]
 
     def _encoder(self, stream: str) -> Callable[[Any], tuple[Any, ...]] | None:
@@ -116,7 +139,7 @@ class CameraRecorder:
 
             return rgb
         if stream == "depth":
-            return None if rec.depth_encoding == "raw" else DepthStream()
+            return None if rec.depth_encoding in RAW_DEPTH else DepthStream()
         return None if rec.semantic_encoding == "raw" else encode_labels
 
     def record(self, t: int, frame_index: int, camera: CameraModel, images: CameraImages) -> Any:
@@ -148,9 +171,12 @@ class CameraRecorder:
                 encode = self._encoders[key]
                 if encode is None:
                     encoded = None
-                    pending = self.writer.submit(
-                        topic, t, functools.partial(M.raw_image, stamp, frame, array)
+                    build = (
+                        functools.partial(_raw_depth, stamp, frame, RAW_DEPTH[self.rec.depth_encoding], array)
+                        if stream == "depth"
+                        else functools.partial(M.raw_image, stamp, frame, array)
                     )
+                    pending = self.writer.submit(topic, t, build)
                 else:
                     encoded = self.writer.run_async(encode, array)
                     pending = self.writer.submit(

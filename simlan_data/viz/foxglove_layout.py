@@ -75,8 +75,15 @@ def _grid(ids: list[str], direction: str = "row") -> Any:
     }
 
 
+# 16UC1 depth in millimetres: Foxglove's default grey range (0-65535) shows it almost black;
+# a turbo colour map over 0-20 m (the hall's depths) shows it as distance
+DEPTH_COLOURS = {"colorMode": "colormap", "colorMap": "turbo", "minValue": 0, "maxValue": 20000}
+
+
 def _image(title: str, topic: str, calibration: str | None) -> dict[str, Any]:
     mode: dict[str, Any] = {"imageTopic": topic}
+    if "/depth/" in topic:
+        mode.update(DEPTH_COLOURS)
     if calibration is not None:
         mode["calibrationTopic"] = calibration
     return {"foxglovePanelTitle": title, "imageMode": mode}
