@@ -112,7 +112,7 @@ def _image_encodings(d: dict[str, Any]) -> list[Figure]:
          "value": round(rate["16UC1"], 2), "unit": "MiB/s", "baseline": f"compressedDepth PNG: {rate['png']:.2f} MiB/s",
          "note": f"RTF {median['16UC1']:.2f} vs {median['png']:.2f}; per frame "
          f"{frame['depth/16UC1']['total_ms']:.1f} vs {frame['depth/png']['total_ms']:.1f} ms (encode + CDR + zstd)",
-         "history": "docs/recording.md"},
+         "history": "docs/benchmarks/spine.md"},
     ]  # fmt: skip
 
 

@@ -82,6 +82,12 @@ class Client:
     def _control(self, msg: dict[str, Any]) -> None:
         if msg["op"] == "serverInfo":
             self.server_info = msg
+        elif msg["op"] == "status" and "unknown channel" in msg.get("message", ""):
+            # a subscription that raced the channel's advertisement (seen under load): again
+            channel_id = int(msg["message"].rsplit(":", 1)[1])
+            for sub, topic in self.by_subscription.items():
+                if self.channels[topic]["id"] == channel_id:
+                    self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": sub, "channelId": channel_id}]}))
         elif msg["op"] == "advertise":
             subscribe = []
             for channel in msg["channels"]:

@@ -40,7 +40,8 @@ def test_inspect_writes_an_rrd_with_the_warehouse_cameras_images_and_errors(tmp_
     rrd = tmp_path / "golden.rrd"
     proc = run_cli(str(GOLDEN), "--save", str(rrd), module="simlan_data.view")
     assert proc.returncode == 0, proc.stderr
-    assert "inspect: 2 cameras, 142 images, 1 agents" in proc.stdout
+    # (the golden recording has labels, no depth)
+    assert "inspect: 2 cameras, 142 colour, 0 depth and 28 label images, 1 agents" in proc.stdout
     rows, values = read_rrd(rrd)
     expected = {
         "/world",

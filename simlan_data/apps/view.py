@@ -96,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     wall = time.perf_counter() - t0
     where = f"{save} ({save.stat().st_size / 2**20:.1f} MiB)" if save is not None else "the Rerun viewer"
     print(
-        f"inspect: {len(logged['cameras'])} cameras, {logged['images']} images, {len(logged['agents'])} agents, "
+        f"inspect: {len(logged['cameras'])} cameras, {logged['images']} colour, {logged['depth_images']} depth and "
+        f"{logged['semantic_images']} label images, {len(logged['agents'])} agents, "
         f"{logged['layout_parts']} layout parts, {len(logged['markers'])} marker topics, {len(logged['events'])} event topics "
         f"-> {where} in {wall:.1f} s"
     )

@@ -147,6 +147,9 @@ class LiveView:
         if last is not None and target is not None:
             target.log(last[1], log_time=last[0])
 
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:  # noqa: ARG002 - SDK signature
+        """Nothing to do (the SDK calls every listener method; a missing one logs an error)."""
+
     # -------------------------------------------------------------------------- pacing
     def pace(self, simulated_s: float) -> None:
         """With ``live.realtime``: wait until the wall clock has caught up with the simulated one."""
