@@ -235,3 +235,13 @@ def test_the_summary_says_when_no_camera_ever_saw_a_robot(
     log_summary(cfg, stats, metrics | {"localization.robot_agent_1.availability": 0.0}, tmp_path)
     notes = [ln for ln in caplog.text.splitlines() if "never seen by a camera" in ln]
     assert notes == [notes[0]] and "robot_agent_1" in notes[0]
+
+
+def test_a_robot_never_in_any_cameras_view_gets_the_note(tmp_path: Path) -> None:
+    """README's ``duration_s=10 cameras=single``: camera 163 never has the truck in view, so its
+    availability is NaN (not 0) and it has no valid estimate; the summary must still say so."""
+    args = ("duration_s=1", "cameras=single", "world.fidelity=empty", "progress=false")
+    proc = run_cli(*args, f"hydra.run.dir={tmp_path / 'run'}")
+    assert proc.returncode == 0, proc.stderr
+    notes = [ln for ln in proc.stdout.splitlines() if "never seen by a camera" in ln]
+    assert len(notes) == 1 and "robot_agent_1" in notes[0], proc.stdout

@@ -24,6 +24,13 @@ class Note:
     in_summary: bool = False  # also printed in the run's summary (else report.md only)
 
 
+def _never_seen(metrics: Mapping[str, float], ns: str) -> bool:
+    """No camera saw ``ns``: no fix while in view, or (never in view) no valid estimate at all."""
+    if metrics.get(f"localization.{ns}.availability") == 0.0:
+        return True
+    return metrics.get(f"localization.{ns}.ticks_valid") == 0.0  # availability is NaN then
+
+
 def run_notes(
     metrics: Mapping[str, float],
     namespaces: Iterable[str],
@@ -37,7 +44,7 @@ def run_notes(
     namespaces = sorted(namespaces)
     config = config or {}
     notes: list[Note] = []
-    unseen = [ns for ns in namespaces if metrics.get(f"localization.{ns}.availability") == 0.0]
+    unseen = [ns for ns in namespaces if _never_seen(metrics, ns)]
     if unseen:  # a camera-steered run whose robot no camera saw: its results mean little
         notes.append(
             Note(
