@@ -205,6 +205,9 @@ def test_dataset_is_deterministic_per_seed(tmp_path: Path) -> None:
         tmp_path / "b" / "dataset.parquet"
     ).read_bytes()
     assert digests[2] != digests[0]
+    # the summary goes through logging: on the console and in Hydra's run.log alike
+    assert "posemap dataset (projection) finished" in proc.stdout
+    assert "posemap dataset (projection) finished" in (tmp_path / "c" / "run.log").read_text()
     df = pl.read_parquet(tmp_path / "a" / "dataset.parquet")  # the columns the README promises
     assert df.columns == ["sample_id", "camera", "estimator", "detected", "landmarks", "joints"]
     assert df.height == 6 * 4 and set(df["camera"]) == {"500", "501", "502", "503"}

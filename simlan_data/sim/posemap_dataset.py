@@ -172,7 +172,7 @@ def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> di
     digest = write_dataset(run_dir, data)
     metrics = _dataset_metrics(cfg, rig, lm, loop_s, setup_s)
     write_metrics(run_dir / METRICS_FILENAME, metrics)
-    print(
+    log.info(
         "\n".join(
             [
                 f"simlan_data: posemap dataset ({estimator.name}) finished",
@@ -182,8 +182,7 @@ def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> di
                 f"  landmarks      {metrics['posemap.dataset.visible_fraction'] * 100:.1f} % visible, person found in {metrics['posemap.dataset.detected_fraction'] * 100:.1f} % of the views",
                 f"  next           python -m simlan_data.run experiment=posemap_train posemap.dataset={run_dir}",
             ]
-        ),
-        flush=True,
+        )
     )
     return metrics
 

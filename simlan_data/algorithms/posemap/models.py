@@ -15,6 +15,7 @@ predictions to the joint limits and save to / load from a directory (``model.jso
 from __future__ import annotations
 
 import json
+import logging
 import pickle
 import time
 from dataclasses import dataclass, field
@@ -26,6 +27,8 @@ from numpy.typing import NDArray
 
 from simlan_data.errors import ConfigError
 from simlan_data.world.skeleton import LOWER, UPPER
+
+log = logging.getLogger(__name__)
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -188,10 +191,7 @@ class MLPMapper(PoseMapper):
                 }
             )
             if progress and (epoch % 10 == 0 or epoch == p.epochs - 1):
-                print(
-                    f"  epoch {epoch:4d}  train mse {total / len(xt):.4f}  val MAE {val_mae:.4f} rad",
-                    flush=True,
-                )
+                log.info("  epoch %4d  train mse %.4f  val MAE %.4f rad", epoch, total / len(xt), val_mae)
             if not len(x_val) or val_mae < best:
                 best = val_mae
                 best_state = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
@@ -256,7 +256,7 @@ class GBMMapper(PoseMapper):
             m.fit(xs, ys[:, j])
             self.models.append(m)
             if progress:
-                print(f"  joint {j + 1}/{y.shape[1]}: {m.n_iter_} trees", flush=True)
+                log.info("  joint %d/%d: %d trees", j + 1, y.shape[1], m.n_iter_)
         limit.restore_original_limits()
         val_mae = _mae_rad(self.predict(x_val), y_val) if len(x_val) else np.nan
         self.history.append({"val_mae_rad": val_mae})

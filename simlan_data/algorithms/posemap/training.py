@@ -9,6 +9,7 @@ the run directory.
 
 from __future__ import annotations
 
+import logging
 import platform
 import time
 from dataclasses import asdict
@@ -29,6 +30,8 @@ from simlan_data.constants import METRICS_FILENAME
 from simlan_data.errors import ConfigError
 from simlan_data.metrics_io import write_metrics
 from simlan_data.world.skeleton import JOINT_NAMES
+
+log = logging.getLogger(__name__)
 
 MODEL_DIRNAME = "model"
 REPORT_NAME = "posemap_report.md"
@@ -225,10 +228,10 @@ def _print_summary(
     refined: bool,
     fit_s: float,
 ) -> None:
-    """Print what was trained: data, test errors against the mean pose, worst joints, timing, where it lies."""
+    """Log what was trained: data, test errors against the mean pose, worst joints, timing, where it lies."""
     worst = sorted(JOINT_NAMES, key=lambda n: -metrics[f"posemap.joint.{n}.mae_rad"])[:3]
     worst_text = ", ".join(f"{n} {metrics['posemap.joint.' + n + '.mae_rad']:.3f}" for n in worst)
-    print(
+    log.info(
         "\n".join(
             [
                 f"simlan_data: posemap {pm.model} ({spec['features']} features, cameras {', '.join(spec['cameras'])}) trained",
@@ -247,8 +250,7 @@ def _print_summary(
                 f"  fit            {fit_s:.1f} s; inference {metrics['posemap.inference_us_per_sample']:.1f} us/sample (batch), {metrics['posemap.latency_ms']:.2f} ms one sample",
                 f"  model          {run_dir / MODEL_DIRNAME}  (report: {run_dir / REPORT_NAME})",
             ]
-        ),
-        flush=True,
+        )
     )
 
 
