@@ -169,7 +169,24 @@ def build_layout(topics: Iterable[str]) -> dict[str, Any]:
             )
             if topic is not None:
                 ids.append(panels.add("Image", _image(f"camera {cid} {title.lower()}", topic, info)))
-        if ids:
+        if ids and stream == "semantic" and schema.SEMANTIC_LABELS in names:
+            # the class names beside the label images (their colours are the PNGs' palette)
+            legend = {
+                "foxglovePanelTitle": "semantic classes (id, name)",
+                "topicPath": schema.SEMANTIC_LABELS,
+            }
+            grids.append(
+                {
+                    "title": title,
+                    "layout": {
+                        "first": _grid(ids),
+                        "second": panels.add("Table", legend),
+                        "direction": "row",
+                        "splitPercentage": 80.0,
+                    },
+                }
+            )
+        elif ids:
             grids.append({"title": title, "layout": _grid(ids)})
     tabs = panels.add("Tab", {"activeTabIdx": 0, "tabs": grids})
     three_d = panels.add("3D", _three_d(names, cameras, agents))
