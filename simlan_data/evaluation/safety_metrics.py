@@ -20,8 +20,11 @@ period):
 - ``safety.max_stop_distance_m``: distance the robot really travelled from a stop command to
   standstill; ``safety.min_clearance_m``: smallest true distance between a robot's footprint and
   a zone that applies to it or another agent's footprint;
-- ``safety.collisions_moving`` / ``_standing``: collisions in which the robot was driving / was
-  standing (hit by another agent).
+- ``safety.collisions_static``: collisions with the layout (a shelf, a wall, a pallet: no other
+  agent among the bodies touched at the onset), whether the robot drove or turned into it;
+  ``safety.collisions_moving`` / ``_standing``: collisions with another agent in which the robot
+  was moving (driving or turning in place) / standing (hit by the other agent). The three add up
+  to ``safety.violations.collisions``.
 """
 
 from __future__ import annotations
@@ -65,6 +68,7 @@ from simlan_data.recording.reader import RecordingReader
 from simlan_data.world.agent_types import agent_type
 
 MOVING_MPS = 0.05
+TURNING_RPS = 0.05  # an in-place turn at more than this is moving (it sweeps the footprint)
 STANDSTILL_MPS = 0.02
 
 
@@ -185,7 +189,7 @@ class _Tally:
     hazards: list[Hazard] = field(default_factory=list)
     tot: dict[str, float] = field(
         default_factory=lambda: dict.fromkeys(
-            ("stops", "slows", "false_stops", "unanswered", "moving", "standing", "visible"), 0.0
+            ("stops", "slows", "false_stops", "unanswered", "moving", "standing", "static", "visible"), 0.0
         )
     )
     stops_by_cause: dict[str, float] = field(default_factory=lambda: dict.fromkeys(CAUSES, 0.0))
@@ -225,6 +229,7 @@ class _Tally:
         out[f"{prefix}.min_clearance_agents_m"] = min(clearances, default=float("inf"))
         out[f"{prefix}.collisions_moving"] = tot["moving"]
         out[f"{prefix}.collisions_standing"] = tot["standing"]
+        out[f"{prefix}.collisions_static"] = tot["static"]
         return out
 
 
@@ -270,13 +275,23 @@ def _collisions(
     touching = (force >= params.config.collision.force_threshold_n) & (force > 0)
     for i in _edges(touching, merge=round(1.0 / dt)):
         lo = max(0, i - 5)
-        was_moving = bool((np.abs(tr.speed_mps[lo : i + 1]) > MOVING_MPS).any())
+        was_moving = bool(
+            (np.abs(tr.speed_mps[lo : i + 1]) > MOVING_MPS).any()
+            or (np.abs(tr.yaw_rate_rps[lo : i + 1]) > TURNING_RPS).any()
+        )
         j = min(n - 1, i + tol)
         ok = bool(stopped[i : j + 1].any()) or not bool(moving[j])
-        who = ", ".join(rec.contacts[r.ns][i][1])
-        v_ns.append(Violation(r.ns, "collision", int(rec.ticks[i]), who, was_moving, ok))
-        tally.tot["moving" if was_moving else "standing"] += 1
+        touched = rec.contacts[r.ns][i][1]
+        v_ns.append(Violation(r.ns, "collision", int(rec.ticks[i]), ", ".join(touched), was_moving, ok))
+        tally.tot[_collision_kind(rec, r.ns, touched, moving=was_moving)] += 1
     return v_ns
+
+
+def _collision_kind(rec: SafetyRecording, ns: str, touched: tuple[str, ...], *, moving: bool) -> str:
+    """``static`` (only layout bodies touched), else ``moving`` / ``standing`` (another agent)."""
+    if not any(o in rec.specs and o != ns for o in touched):
+        return "static"
+    return "moving" if moving else "standing"
 
 
 def _unobserved_intervals(rec: SafetyRecording, r: _Robot, tol: int) -> list[Violation]:
