@@ -2,6 +2,18 @@
 
 Pure numpy: inputs are the robot's estimated pose and the coordinator's decision, the output is a
 velocity command. It never sees ground truth.
+
+A goal the robot does not reach fails for one of :data:`FAILURE_REASONS`:
+
+- ``unreachable``: the planner found no path to it (given up at once, the next goal follows);
+- ``blocked``: the run ended while the robot had made no progress towards it (moved less than
+  :data:`PROGRESS_M` on its estimated pose) for at least :data:`BLOCKED_AFTER_S`: stopped by the
+  safety layer, by the coordinator, behind another robot, or without a pose estimate;
+- ``timeout``: the run ended first (the robot was still making progress, or had not started on
+  the goal yet).
+
+The state of the status that records a failure is ``failed_<reason>`` (:func:`failure_reason`
+reads it back), so the reason travels in the navigation status message without a new field.
 """
 
 from __future__ import annotations
@@ -14,9 +26,21 @@ from numpy.typing import NDArray
 from simlan_data.algorithms.coordinator import Decision, Intent
 from simlan_data.algorithms.follower import PathFollower, PursuitParams
 from simlan_data.algorithms.planner import GridPlanner, Plan, PlanningError
+from simlan_data.constants import NS_PER_S
 
 DETOUR_MAX_FACTOR = 1.5
 DETOUR_MAX_EXTRA_M = 6.0
+FAILURE_REASONS = ("unreachable", "blocked", "timeout")
+FAILED_STATE_PREFIX = "failed_"
+BLOCKED_AFTER_S = 10.0  # no progress for this long when the run ends: blocked, not timeout
+PROGRESS_M = 0.1  # the estimated position moved at least this far: progress
+
+
+def failure_reason(state: str) -> str | None:
+    """The reason a status with ``state`` records a failed goal for, or None (not a failure)."""
+    if state.startswith(FAILED_STATE_PREFIX):
+        return state[len(FAILED_STATE_PREFIX) :]
+    return None
 
 
 @dataclass
@@ -24,10 +48,19 @@ class NavigationStatus:
     goals_total: int
     goals_reached: int = 0
     goals_failed: int = 0
-    state: str = "idle"  # idle | waiting_localization | waiting | following | safety_stop | done
+    # idle | waiting_localization | waiting | following | safety_stop | done | failed_<reason>
+    state: str = "idle"
     planned_length_m: float = 0.0  # sum of the first plan's length of every goal
     plans: int = 0
-    failures: list[str] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)  # why, one line per failed goal
+    failed_by_reason: dict[str, int] = field(default_factory=lambda: dict.fromkeys(FAILURE_REASONS, 0))
+
+    def fail(self, reason: str, count: int, why: str) -> None:
+        """Count ``count`` goals failed for ``reason`` (one of FAILURE_REASONS)."""
+        self.goals_failed += count
+        self.failed_by_reason[reason] += count
+        self.failures += [why] * count
+        self.state = FAILED_STATE_PREFIX + reason
 
 
 class Navigator:
@@ -51,6 +84,9 @@ class Navigator:
         self.new_plan = False  # set when a plan was made; the caller publishes and clears it
         self.status = NavigationStatus(len(self.goals))
         self._goal_first_plan = True
+        self._pose: tuple[float, float] | None = None  # the newest estimated position given
+        self._anchor: tuple[float, float] | None = None  # where progress was last seen ...
+        self._progress_ns: int | None = None  # ... and when (None: not yet clocked on this goal)
 
     @property
     def goal(self) -> NDArray[np.float64] | None:
@@ -64,8 +100,7 @@ class Navigator:
         try:
             plan = self.planner.plan((x, y), (float(goal[0]), float(goal[1])))
         except PlanningError as err:
-            self.status.failures.append(str(err))
-            self.status.goals_failed += 1
+            self.status.fail("unreachable", 1, str(err))
             self._advance()
             return
         self._adopt(plan)
@@ -117,6 +152,43 @@ class Navigator:
             self.index = 0
         self.follower, self.plan = None, None
         self._goal_first_plan = True
+        self._anchor = self._progress_ns = None
+
+    def clock(self, t_ns: int) -> None:
+        """Note the time of a control tick: progress is the estimated position moving
+        :data:`PROGRESS_M` from where it was when progress was last seen (or the goal began)."""
+        if self.goal is None:
+            return
+        if self._progress_ns is None:  # the goal's first tick
+            self._anchor, self._progress_ns = self._pose, t_ns
+        elif self._pose is None:  # no estimate yet: no progress
+            return
+        elif self._anchor is None:  # the first estimate: where progress is measured from
+            self._anchor = self._pose
+        elif np.hypot(*np.subtract(self._pose, self._anchor)) >= PROGRESS_M:
+            self._anchor, self._progress_ns = self._pose, t_ns
+
+    def finish(self, t_ns: int) -> list[tuple[str, int]]:
+        """The run ends at ``t_ns``: fail the goals left (none on a loop), the current one
+        ``blocked`` if the robot made no progress for :data:`BLOCKED_AFTER_S`, the rest ``timeout``.
+
+        Returns (reason, count) in the order they were counted (each one status to publish).
+        """
+        if self.loop or self.goal is None:
+            return []
+        out: list[tuple[str, int]] = []
+        left = len(self.goals) - self.index
+        stalled_s = None if self._progress_ns is None else (t_ns - self._progress_ns) / NS_PER_S
+        if stalled_s is not None and stalled_s >= BLOCKED_AFTER_S:
+            self.status.fail("blocked", 1, f"no progress for {stalled_s:.1f} s when the run ended")
+            out.append(("blocked", 1))
+            left -= 1
+        if left:
+            self.status.fail("timeout", left, "the run ended first")
+            out.append(("timeout", left))
+        self.index = len(self.goals)
+        self.follower, self.plan = None, None
+        return out
 
     def intent(
         self,
@@ -126,6 +198,7 @@ class Navigator:
     ) -> Intent | None:
         if pose_xyyaw is None:
             return None
+        self._pose = (pose_xyyaw[0], pose_xyyaw[1])
         ahead = None
         if self.follower is not None and not self.follower.done:
             f = self.follower
@@ -149,6 +222,7 @@ class Navigator:
             self.status.state = "waiting_localization"
             return 0.0, 0.0
         x, y, yaw = pose_xyyaw
+        self._pose = (x, y)
         if self.follower is None:
             self._make_plan(x, y)
             if self.follower is None:

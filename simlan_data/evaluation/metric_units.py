@@ -17,6 +17,8 @@ import re
 from dataclasses import dataclass
 from functools import cache
 
+from simlan_data.algorithms.navigation import BLOCKED_AFTER_S
+
 __all__ = ["AREAS", "UNITS", "MetricUnit", "area_of", "format_metric", "format_number", "unit_of"]
 
 
@@ -44,6 +46,16 @@ UNITS: dict[str, MetricUnit] = {
     # ---------------------------------------------------------------------------- navigation
     **_per_agent("navigation", "goals_reached", MetricUnit(_COUNT, "goals reached")),
     **_per_agent("navigation", "goals_total", MetricUnit(_COUNT, "goals given")),
+    **_per_agent("navigation", "goals_failed", MetricUnit(_COUNT, "goals not reached (every reason)")),
+    **_per_agent("navigation", "goals_failed.unreachable", MetricUnit(_COUNT, "goals failed: no path")),
+    **_per_agent(
+        "navigation",
+        "goals_failed.blocked",
+        MetricUnit(_COUNT, f"goals failed: no progress for {BLOCKED_AFTER_S:g} s when the run ended"),
+    ),
+    **_per_agent(
+        "navigation", "goals_failed.timeout", MetricUnit(_COUNT, "goals failed: the run ended first")
+    ),
     **_per_agent("navigation", "collisions", MetricUnit(_COUNT, "collisions (collision sensor, onsets)")),
     "navigation.*.driven_m": MetricUnit("m", "distance driven (ground truth)"),
     **_per_agent(
@@ -109,8 +121,9 @@ UNITS: dict[str, MetricUnit] = {
     "safety.min_clearance_agents_m": MetricUnit(
         "m", "smallest clearance to another agent", inf="none: no other agent"
     ),
-    "safety.collisions_moving": MetricUnit(_COUNT, "collisions while the robot moved"),
-    "safety.collisions_standing": MetricUnit(_COUNT, "collisions while the robot stood"),
+    "safety.collisions_moving": MetricUnit(_COUNT, "collisions with another agent while the robot moved"),
+    "safety.collisions_standing": MetricUnit(_COUNT, "collisions with another agent while the robot stood"),
+    "safety.collisions_static": MetricUnit(_COUNT, "collisions with the layout (shelf, wall, pallet)"),
     # ------------------------------------------------------------------- agents (simulator)
     "agents.collisions": MetricUnit(_COUNT, "contact onsets with anything but the floor (all agents)"),
     "agents.*.collisions": MetricUnit(_COUNT, "contact onsets with anything but the floor"),

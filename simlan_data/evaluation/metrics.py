@@ -12,6 +12,14 @@ Localization (per agent and overall, at control ticks):
   at which the marker is in at least one camera's view (from ground truth: all four corners on
   valid pixels inside the image, facing the camera, at least ``MIN_SIDE_PX`` wide);
 - ``latency_s``: mean age of the newest fix (image capture to the tick that uses it).
+
+Navigation (per agent ``navigation.<ns>.*`` and summed ``navigation.*``): ``goals_reached``,
+``goals_total``, ``goals_failed`` and ``goals_failed.<reason>`` for each reason of
+:data:`~simlan_data.algorithms.navigation.FAILURE_REASONS` (``unreachable``: no path;
+``blocked``: no progress for ``BLOCKED_AFTER_S`` when the run ended; ``timeout``: the run ended
+first), read from the ``failed_<reason>`` states of the recorded navigation status. A recording
+that does not say why (format 1.0, or cut short by a crash) counts a failure it records as
+``unreachable`` (the only reason then) and a goal left at its end as ``timeout``.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ import polars as pl
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.markers import marker_corners_in_marker_frame
+from simlan_data.algorithms.navigation import FAILURE_REASONS, failure_reason
 from simlan_data.constants import NS_PER_S
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.rotations import wrap_angle
@@ -115,10 +124,14 @@ class RecordedRows:
         rows.append((m.stamp_ns, m.msg.observed, m.msg.valid, m.msg.fix_age_s))
 
     def _navigation(self, m: Message, ns: str) -> None:
-        _, hits, prev = self.navigation[ns]
+        last, hits, prev = self.navigation[ns]
         status = m.msg
+        failed = dict(last[3]) if last is not None else dict.fromkeys(FAILURE_REASONS, 0)
+        new_failures = int(status.goals_failed) - sum(failed.values())
+        if new_failures > 0:  # (a recording without reasons only ever failed for want of a path)
+            failed[failure_reason(str(status.state)) or "unreachable"] += new_failures
         self.navigation[ns] = (
-            (int(status.goals_reached), int(status.goals_total), float(status.planned_length_m)),
+            (int(status.goals_reached), int(status.goals_total), float(status.planned_length_m), failed),
             hits,
             prev,
         )
@@ -265,6 +278,7 @@ def navigation_metrics(
     )
     out: dict[str, float] = {}
     reached = total = collisions = 0
+    failed_all = dict.fromkeys(FAILURE_REASONS, 0)
     ratios = []
     for ns in namespaces:
         last, hits, _ = rows.navigation[ns]
@@ -275,9 +289,17 @@ def navigation_metrics(
             else 0.0
         )
         prefix = f"navigation.{ns}."
-        g_reached, g_total, planned = last if last is not None else (0, 0, 0.0)
+        g_reached, g_total, planned, failed = (
+            last if last is not None else (0, 0, 0.0, dict.fromkeys(FAILURE_REASONS, 0))
+        )
+        failed = dict(failed)
+        failed["timeout"] += max(0, g_total - g_reached - sum(failed.values()))  # left, not recorded
         out[prefix + "goals_reached"] = float(g_reached)
         out[prefix + "goals_total"] = float(g_total)
+        out[prefix + "goals_failed"] = float(sum(failed.values()))
+        for reason, count in failed.items():
+            out[prefix + "goals_failed." + reason] = float(count)
+            failed_all[reason] += count
         out[prefix + "collisions"] = float(hits)
         out[prefix + "driven_m"] = driven
         if planned > 0 and g_reached == g_total:
@@ -288,6 +310,9 @@ def navigation_metrics(
         collisions += hits
     out["navigation.goals_reached"] = float(reached)
     out["navigation.goals_total"] = float(total)
+    out["navigation.goals_failed"] = float(sum(failed_all.values()))
+    for reason, count in failed_all.items():
+        out["navigation.goals_failed." + reason] = float(count)
     out["navigation.collisions"] = float(collisions)
     if ratios:
         out["navigation.path_length_ratio"] = float(np.mean(ratios))

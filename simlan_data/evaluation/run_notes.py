@@ -13,7 +13,15 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from simlan_data.algorithms.navigation import BLOCKED_AFTER_S
+
 REALTIME_SLACK = 0.95  # a realtime run (live.realtime) below this real-time factor fell behind
+
+_FAILURE_WHY = {  # the reasons of simlan_data.algorithms.navigation.FAILURE_REASONS, for people
+    "unreachable": "no path",
+    "blocked": f"no progress for {BLOCKED_AFTER_S:g} s at the end",
+    "timeout": "the run ended first",
+}
 
 __all__ = ["Note", "run_notes"]
 
@@ -29,6 +37,25 @@ def _never_seen(metrics: Mapping[str, float], ns: str) -> bool:
     if metrics.get(f"localization.{ns}.availability") == 0.0:
         return True
     return metrics.get(f"localization.{ns}.ticks_valid") == 0.0  # availability is NaN then
+
+
+def _goals_note(metrics: Mapping[str, float], ns: str, failed_recorded: int) -> Note | None:
+    """``ns`` did not reach every goal: how many, and why each failed (in the summary too: a
+    failed goal is a result of the run, which still exits 0, and must not go unseen)."""
+    reached = metrics.get(f"navigation.{ns}.goals_reached")
+    total = metrics.get(f"navigation.{ns}.goals_total")
+    if not total or reached is None or reached >= total:
+        return None
+    text = f"{ns} reached {reached:.0f} of {total:.0f} goals in {metrics.get('sim.duration_s', 0.0):.3g} s simulated"
+    failed = metrics.get(f"navigation.{ns}.goals_failed")
+    if failed is None:  # metrics of an older version: only the given-up count, from the recording
+        return Note(text + (f", {failed_recorded} given up (no path)" if failed_recorded else ""))
+    why = ", ".join(
+        f"{n:.0f} {reason} ({what})"
+        for reason, what in _FAILURE_WHY.items()
+        if (n := metrics.get(f"navigation.{ns}.goals_failed.{reason}", 0.0))
+    )
+    return Note(f"{text}; {failed:.0f} failed: {why}", in_summary=True)
 
 
 def run_notes(
@@ -62,17 +89,9 @@ def run_notes(
             )
         )
     for ns in namespaces:
-        reached = metrics.get(f"navigation.{ns}.goals_reached")
-        total = metrics.get(f"navigation.{ns}.goals_total")
-        failed = (goals_failed or {}).get(ns, 0)
-        if total and reached is not None and reached < total:
-            why = f", {failed} given up (no path)" if failed else ""
-            notes.append(
-                Note(
-                    f"{ns} reached {reached:.0f} of {total:.0f} goals in "
-                    f"{metrics.get('sim.duration_s', 0.0):.3g} s simulated{why}"
-                )
-            )
+        note = _goals_note(metrics, ns, (goals_failed or {}).get(ns, 0))
+        if note is not None:
+            notes.append(note)
         hits = metrics.get(f"agents.{ns}.collisions", 0.0)
         if hits:
             notes.append(Note(f"{ns} collided {hits:.0f} time{'s' if hits != 1 else ''} (collision sensor)"))

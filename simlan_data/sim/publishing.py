@@ -8,7 +8,7 @@ from typing import Any
 from simlan_data import __version__
 from simlan_data.algorithms.localization import PoseEstimate
 from simlan_data.algorithms.markers import Detection
-from simlan_data.algorithms.navigation import Navigator
+from simlan_data.algorithms.navigation import FAILED_STATE_PREFIX, Navigator
 from simlan_data.algorithms.safety import Monitor, SafetyDecision, SafetyEvent, Zone
 from simlan_data.config.schema import Config
 from simlan_data.constants import FORMAT_VERSION
@@ -175,6 +175,8 @@ class Publisher:
             self.writer.write(global_topic(schema.TF), t, M.tf_message(tfs))
 
     def navigation(self, t: int, ns: str, nav: Navigator, blocked_by: tuple[str, ...]) -> None:
+        """The control tick's plan, goal and navigation status (when changed) of one robot."""
+        nav.clock(t)
         topics, stamp = self.topics[ns], self.writer.stamp_ns(t)
         if nav.new_plan and nav.plan is not None:
             self.writer.write(topics["plan"], t, M.path(stamp, schema.MAP_FRAME, nav.plan.points_xy.tolist()))
@@ -191,20 +193,35 @@ class Publisher:
         key = (s.state, nav.index, s.goals_reached, s.goals_failed, blocked_by)
         if self._status.get(ns) != key:
             self._status[ns] = key
-            self.writer.write(
-                topics["navigation"],
-                t,
-                M.navigation_status(
-                    stamp,
-                    state=s.state,
-                    goal_index=nav.index,
-                    goals_total=s.goals_total,
-                    goals_reached=s.goals_reached,
-                    goals_failed=s.goals_failed,
-                    planned_length_m=s.planned_length_m,
-                    blocked_by=blocked_by,
-                ),
-            )
+            self._navigation_status(t, ns, nav, s.state, s.goals_failed, blocked_by)
+
+    def navigation_end(self, t: int, navigators: dict[str, Navigator]) -> None:
+        """The run ends at ``t``: the goals each robot has left fail (blocked or timeout), one
+        status per reason, so that the recording says why every goal not reached was not."""
+        for ns, nav in navigators.items():
+            failed = nav.status.goals_failed
+            for reason, count in nav.finish(t):
+                failed += count
+                self._navigation_status(t, ns, nav, FAILED_STATE_PREFIX + reason, failed, ())
+
+    def _navigation_status(
+        self, t: int, ns: str, nav: Navigator, state: str, goals_failed: int, blocked_by: tuple[str, ...]
+    ) -> None:
+        s = nav.status
+        self.writer.write(
+            self.topics[ns]["navigation"],
+            t,
+            M.navigation_status(
+                self.writer.stamp_ns(t),
+                state=state,
+                goal_index=nav.index,
+                goals_total=s.goals_total,
+                goals_reached=s.goals_reached,
+                goals_failed=goals_failed,
+                planned_length_m=s.planned_length_m,
+                blocked_by=blocked_by,
+            ),
+        )
 
     # ------------------------------------------------------------------------------ safety
     def safety_zones(self, zones: tuple[Zone, ...]) -> None:

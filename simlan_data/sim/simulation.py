@@ -314,6 +314,7 @@ class Simulation:
             if step < self.steps:
                 self._physics_step(run)
         stats.sim_duration_ns = self.stamp_ns(last)
+        run.pub.navigation_end(stats.sim_duration_ns, run.stack.navigators)  # goals left: why not reached
         if run.driver is not None:
             stats.extra_metrics.update(run.driver.finish())
         stats.navigation = {ns: nav.status for ns, nav in run.stack.navigators.items()}
