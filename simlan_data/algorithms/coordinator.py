@@ -32,6 +32,7 @@ class Intent:
     footprint_m: tuple[float, float, float, float]  # x0, x1, y0, y1 in base_link
     path_ahead_xy: NDArray[np.float64] | None = None  # (N, 2) from the current position; None: not navigating
     yields: bool = True  # False for people and fixed robots: others must go around them
+    goal_xy: tuple[float, float] | None = None  # where it is navigating to (None: no goal)
 
 
 def _footprint_rings(
@@ -96,6 +97,7 @@ class Decision:
     speed_limit_mps: float | None  # 0 = wait, None = free
     blocked_by: tuple[str, ...] = ()
     replan: bool = False  # look for a way around the others (see Coordinator)
+    path_xy: NDArray[np.float64] | None = None  # follow this path to the goal (a fleet coordinator's route)
 
 
 @dataclass

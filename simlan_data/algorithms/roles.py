@@ -37,6 +37,7 @@ from simlan_data.algorithms.birdseye import CanvasSpec
 from simlan_data.algorithms.coordinator import Decision, Intent
 from simlan_data.algorithms.localization import PoseEstimate
 from simlan_data.algorithms.markers import MarkerMount
+from simlan_data.algorithms.occupancy import OccupancyGrid
 from simlan_data.algorithms.safety import Mover, RobotSpec, SafetyDecision, SafetyWorld
 from simlan_data.geometry.camera import CameraModel
 
@@ -74,9 +75,11 @@ class LocalizerContext:
 
 @dataclass(frozen=True)
 class CoordinatorContext:
-    """What a coordinator is built with."""
+    """What a coordinator is built with: the fleet's safety distance and the occupancy grid the
+    robots plan on (None where a caller has none; the built-in ``gpss`` does not need it)."""
 
     safety_distance_m: float
+    grid: OccupancyGrid | None = None
 
 
 @dataclass(frozen=True)

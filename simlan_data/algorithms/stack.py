@@ -16,7 +16,7 @@ robots come from the localizer, people from the cameras' person detector.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -40,7 +40,7 @@ from simlan_data.algorithms.people import (
     PersonTracker,
     fuse_people,
 )
-from simlan_data.algorithms.planner import GridPlanner
+from simlan_data.algorithms.planner import GridPlanner, Plan
 from simlan_data.algorithms.roles import (
     CameraFrame,
     CoordinatorContext,
@@ -146,7 +146,9 @@ class GpssStack:
         self.searching = searches(self.localizer)  # the optional fast path (see roles)
         self._frames: dict[str, CameraFrame] = {}
         make_coordinator = coordinator or (lambda ctx: GpssCoordinator(GpssCoordinatorConfig(), ctx))
-        self.coordinator = make_coordinator(CoordinatorContext(safety_distance_m=nav.safety_distance_m))
+        self.coordinator = make_coordinator(
+            CoordinatorContext(safety_distance_m=nav.safety_distance_m, grid=grid)
+        )
         self._granted: set[str] = set()  # robots the coordinator let drive at the last decision
         # the last pose GPSS knew of every robot: its spawn pose until the cameras first see it
         self.last_known: dict[str, tuple[float, float, float]] = {a.namespace: a.pose for a in agents}
@@ -339,6 +341,8 @@ class GpssStack:
         for ns, nav in self.navigators.items():
             if ns in poses:
                 intent = nav.intent(poses[ns], self.agents[ns].number, self.agents[ns].kind.footprint_m)
+                if intent is not None and nav.goal is not None:  # a fleet coordinator routes to it
+                    intent = replace(intent, goal_xy=(float(nav.goal[0]), float(nav.goal[1])))
             else:  # not localized: it stands still where it was last known, others keep clear
                 intent = Intent(
                     ns,
@@ -419,6 +423,8 @@ class GpssStack:
                 continue
             self._cancelled.discard(ns)
             decision = out.decisions.get(ns)
+            if decision is not None and decision.path_xy is not None:
+                self._follow_route(nav, decision.path_xy)
             if decision is not None and decision.replan and ns in poses:
                 self._detour(ns, poses[ns], [i for i in intents if i.namespace != ns])
             if guard.speed_limit_mps is not None:
@@ -432,6 +438,14 @@ class GpssStack:
             x, y, yaw = truth[ns]
             cmd = walker.step(x, y, yaw, dt_s)
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
+
+    @staticmethod
+    def _follow_route(nav: Navigator, path_xy: NDArray[np.float64]) -> None:
+        """Follow the coordinator's route (a fleet plan) unless it is the path followed already."""
+        if nav.goal is None or (nav.plan is not None and np.array_equal(nav.plan.points_xy, path_xy)):
+            return
+        length = float(np.sum(np.linalg.norm(np.diff(path_xy, axis=0), axis=1)))
+        nav.adopt(Plan(path_xy, length, 0))
 
     def safety_states(self) -> dict[str, tuple[SafetyDecision, Monitor]]:
         """Every guarded robot's decision and state-topic values after the last control tick: the

@@ -1,0 +1,54 @@
+"""The fleet coordinator's parameters (``algorithms.coordinator.*`` with ``algorithms/coordinator=fleet``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from simlan_data.errors import ConfigError
+
+_KEY = "algorithms.coordinator."
+
+
+def _within(name: str, value: float, low: float, high: float, unit: str, default: float) -> None:
+    if not low < value <= high:
+        raise ConfigError.invalid(
+            _KEY + name, value, f"must be within {low}..{high} {unit}", f"use {default}"
+        )
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    """Route graph, timing and execution of the fleet coordinator (see docs/fleet.md)."""
+
+    spacing_m: float = 1.0  # route graph block size: node spacing on open floor, one plan step of travel
+    lane_clearance_m: float = 0.25  # a lane keeps the widest robot's half width plus this from obstacles
+    speed_mps: float = 0.5  # planning speed (a step lasts spacing_m / speed_mps)
+    horizon_s: float = 90.0  # reservation horizon: how far ahead plans are reserved
+    safety_m: float = (
+        0.0  # extra distance between two robots' swept circles (on top of the run's safety distance)
+    )
+    reach_m: float = 0.35  # a robot within this of a route vertex has reached it
+    brake_m: float = 1.0  # below this distance to the last vertex it may enter, the speed limit tapers
+    stall_s: float = 3.0  # allowed to move but not moving for this long: stopped (an obstacle, replan)
+    deadlock_after_s: float = 10.0  # deadlock bound: a robot waiting this long on a robot that does not move
+    replan_s: float = 5.0  # replan this often while a plan is windowed or a robot queues or is stopped
+
+    def __post_init__(self) -> None:
+        _within("spacing_m", self.spacing_m, 0.2, 5.0, "m", 1.0)
+        _within("lane_clearance_m", self.lane_clearance_m, -1e-9, 2.0, "m", 0.25)
+        _within("speed_mps", self.speed_mps, 0.0, 5.0, "m/s", 0.5)
+        _within("horizon_s", self.horizon_s, 0.0, 1800.0, "s", 90.0)
+        _within("safety_m", self.safety_m, -1e-9, 5.0, "m", 0.0)
+        _within("reach_m", self.reach_m, 0.0, 2.0, "m", 0.35)
+        _within("brake_m", self.brake_m, 0.0, 10.0, "m", 1.0)
+        _within("stall_s", self.stall_s, 0.0, 600.0, "s", 3.0)
+        _within("deadlock_after_s", self.deadlock_after_s, 0.0, 600.0, "s", 10.0)
+        _within("replan_s", self.replan_s, 0.0, 600.0, "s", 5.0)
+
+    @property
+    def step_s(self) -> float:
+        return self.spacing_m / self.speed_mps
+
+    @property
+    def horizon_steps(self) -> int:
+        return max(4, round(self.horizon_s / self.step_s))

@@ -1,0 +1,249 @@
+"""The fleet coordinator (``algorithms/coordinator=fleet``): one plan for the whole fleet.
+
+Data flow per control tick::
+
+    intents (pose, footprint, goal) --> movers / obstacles (stopped, unlocalized, people)
+        --> replan? (new goal, stop, deviation, windowed plan) --> plan_fleet (graph, reservations)
+        --> routes + dependencies (ADG) --> progress of each robot along its route
+        --> frontier (the furthest vertex it may enter) --> Decision(path_xy, speed limit)
+
+Each robot is sent its route as a path (``Decision.path_xy``: the navigator follows it) and a
+speed limit that stops it before the first vertex it may not enter yet.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simlan_data.algorithms.coordinator import Decision, Intent
+from simlan_data.algorithms.fleet.config import FleetConfig
+from simlan_data.algorithms.fleet.execution import Route, advance, build_routes, frontier, wait_cycles
+from simlan_data.algorithms.fleet.graph import RouteGraph, build_route_graph
+from simlan_data.algorithms.fleet.schedule import FleetPlan, Obstacle, Request, Timing, plan_fleet
+from simlan_data.algorithms.occupancy import OccupancyGrid
+from simlan_data.algorithms.roles import CoordinatorContext
+from simlan_data.constants import NS_PER_S
+from simlan_data.errors import ConfigError
+
+MOVED_M = 0.05  # less than this in stall_s: not moving
+
+
+def reach_of(footprint_m: tuple[float, float, float, float]) -> float:
+    """The radius of the circle a footprint sweeps turning about its centre (base_link)."""
+    x0, x1, y0, y1 = footprint_m
+    return float(np.hypot(max(abs(x0), abs(x1)), max(abs(y0), abs(y1))))
+
+
+@dataclass
+class _Robot:
+    """What the coordinator remembers of one robot between ticks."""
+
+    goal: tuple[float, float] | None = None
+    path_xy: NDArray[np.float64] | None = None
+    moved_at_ns: int = 0
+    moved_from: tuple[float, float] = (0.0, 0.0)
+    waiting_since_ns: int | None = None
+    stopped_since_ns: int | None = None  # treated as an obstacle from then on
+
+
+@dataclass
+class FleetState:
+    """The plan in force and what it has observed (read by tests and metrics)."""
+
+    plan: FleetPlan = field(default_factory=FleetPlan)
+    routes: dict[str, Route] = field(default_factory=dict)
+    planned_at_ns: int = 0
+    replans: int = 0
+    deadlocks: int = 0  # wait-for cycles or waits past deadlock_after_s on a robot that does not move
+    failures: dict[str, str] = field(default_factory=dict)  # robot -> unreachable | blocked
+
+
+class FleetCoordinator:
+    """Prioritized space-time planning on a route graph, executed through an ADG."""
+
+    role: ClassVar[str] = "coordinator"
+    config_class: ClassVar[type] = FleetConfig
+
+    def __init__(self, config: FleetConfig, context: CoordinatorContext) -> None:
+        grid = getattr(context, "grid", None)
+        if not isinstance(grid, OccupancyGrid):
+            raise ConfigError(
+                "the fleet coordinator needs the occupancy grid",
+                "algorithms/coordinator=fleet",
+                "its context has no grid",
+                "run it through GpssStack (it passes the grid), or build CoordinatorContext(grid=...)",
+            )
+        self.config, self.grid = config, grid
+        self.safety_m = context.safety_distance_m + config.safety_m
+        self.graph: RouteGraph | None = None
+        self.state = FleetState()
+        self._robots: dict[str, _Robot] = {}
+        self.waits: dict[str, int] = {}  # ticks spent waiting, per robot (as the gpss coordinator)
+        self._force_replan = False
+
+    # ------------------------------------------------------------------ the role's method
+    def decide(self, t_ns: int, intents: list[Intent]) -> dict[str, Decision]:
+        movers = [i for i in intents if i.yields and i.goal_xy is not None]
+        graph = self._graph(intents)
+        self._observe(t_ns, movers)
+        if self._must_replan(t_ns, movers):
+            self._replan(t_ns, graph, movers, [i for i in intents if i not in movers])
+        return self._decisions(t_ns, graph, movers)
+
+    # ------------------------------------------------------------------ steps
+    def _graph(self, intents: list[Intent]) -> RouteGraph:
+        """Build the route graph once, for the widest robot seen at the first tick."""
+        if self.graph is None:
+            robots = [i for i in intents if i.yields] or intents
+            half = max((max(abs(i.footprint_m[2]), abs(i.footprint_m[3])) for i in robots), default=0.5)
+            reach = max((reach_of(i.footprint_m) for i in robots), default=0.5)
+            self.graph = build_route_graph(
+                self.grid,
+                radius_m=half + self.config.lane_clearance_m,
+                spacing_m=self.config.spacing_m,
+                reach_m=reach,
+            )
+        return self.graph
+
+    def _observe(self, t_ns: int, movers: list[Intent]) -> None:
+        """Track movement: a robot allowed to drive that has not moved for stall_s is stopped."""
+        for i in movers:
+            r = self._robots.setdefault(i.namespace, _Robot(moved_at_ns=t_ns, moved_from=i.pose_xyyaw[:2]))
+            xy = i.pose_xyyaw[:2]
+            if np.hypot(xy[0] - r.moved_from[0], xy[1] - r.moved_from[1]) > MOVED_M:
+                r.moved_at_ns, r.moved_from = t_ns, xy
+                r.stopped_since_ns = None
+            route = self.state.routes.get(i.namespace)
+            if route is not None and self.graph is not None:
+                advance(
+                    route,
+                    np.asarray(xy),
+                    self.graph,
+                    frontier(self.state.routes, i.namespace)[0],
+                    self.config.reach_m,
+                )
+            granted = route is not None and frontier(self.state.routes, i.namespace)[0] > route.progress
+            stalled = t_ns - r.moved_at_ns > self.config.stall_s * NS_PER_S
+            if granted and stalled and r.stopped_since_ns is None:
+                r.stopped_since_ns = t_ns
+
+    def _must_replan(self, t_ns: int, movers: list[Intent]) -> bool:
+        names = {i.namespace for i in movers}
+        if self._force_replan:
+            self._force_replan = False
+            return True
+        stopped = {n for n, r in self._robots.items() if r.stopped_since_ns is not None}
+        if names - stopped != set(self.state.plan.plans) | set(self.state.plan.failures):
+            return True
+        for i in movers:
+            r = self._robots[i.namespace]
+            if r.goal != i.goal_xy:
+                return True
+            if r.stopped_since_ns is not None and r.stopped_since_ns >= self.state.planned_at_ns:
+                return True  # stopped since the plan: plan around it
+        pending = (
+            bool(self.state.plan.failures)
+            or any(not p.complete or p.queued for p in self.state.plan.plans.values())
+            or any(r.stopped_since_ns is not None for r in self._robots.values())
+        )
+        return pending and t_ns - self.state.planned_at_ns >= self.config.replan_s * NS_PER_S
+
+    def _replan(self, t_ns: int, graph: RouteGraph, movers: list[Intent], others: list[Intent]) -> None:
+        """Plan every moving robot from where it is (stopped ones and the others are obstacles)."""
+        snap = 1.5 * self.config.spacing_m
+        obstacles = [Obstacle(i.pose_xyyaw[:2], reach_of(i.footprint_m)) for i in others]
+        requests, radii = [], {}
+        for i in sorted(movers, key=lambda i: (i.priority, i.namespace)):
+            r = self._robots[i.namespace]
+            r.goal = i.goal_xy
+            if r.stopped_since_ns is not None and r.stopped_since_ns < t_ns:
+                obstacles.append(Obstacle(i.pose_xyyaw[:2], reach_of(i.footprint_m)))
+                continue  # until it moves again (on its own navigator's plan): then it rejoins
+            start = graph.nearest(i.pose_xyyaw[:2], within_m=snap)
+            if start is None:
+                obstacles.append(Obstacle(i.pose_xyyaw[:2], reach_of(i.footprint_m)))
+                continue
+            assert i.goal_xy is not None
+            goal = graph.nearest(i.goal_xy, within_m=snap)
+            radii[i.namespace] = reach_of(i.footprint_m)
+            requests.append(Request(i.namespace, start, goal, radii[i.namespace], i.pose_xyyaw[2]))
+        timing = Timing(self.config.spacing_m, self.config.horizon_steps, self.safety_m)
+        plan = plan_fleet(graph, requests, obstacles, timing)
+        self.state.plan, self.state.planned_at_ns = plan, t_ns
+        self.state.routes = build_routes(graph, plan, radii, timing.margin(graph))
+        self.state.failures.update(plan.failures)
+        self.state.replans += 1
+        for i in movers:
+            route = self.state.routes.get(i.namespace)
+            r = self._robots[i.namespace]
+            r.path_xy = None if route is None else self._path(graph, route, i)
+
+    def _path(self, graph: RouteGraph, route: Route, intent: Intent) -> NDArray[np.float64]:
+        """The path the navigator follows: from the robot through the route's vertices to its goal."""
+        pts = [np.asarray(intent.pose_xyyaw[:2], dtype=float)] + [graph.xy[n] for n in route.nodes[1:]]
+        if intent.goal_xy is not None:
+            pts.append(np.asarray(intent.goal_xy, dtype=float))
+        keep = [pts[0]] + [p for a, p in itertools.pairwise(pts) if np.linalg.norm(p - a) > 1e-6]
+        return np.asarray(keep if len(keep) >= 2 else [pts[0], pts[0]])
+
+    def _decisions(self, t_ns: int, graph: RouteGraph, movers: list[Intent]) -> dict[str, Decision]:
+        out: dict[str, Decision] = {}
+        waits: dict[str, list[str]] = {}
+        for i in movers:
+            ns, r = i.namespace, self._robots[i.namespace]
+            route = self.state.routes.get(ns)
+            if r.stopped_since_ns is not None:
+                out[ns] = Decision(None)  # stopped: an obstacle for the plan until it moves on its own
+                continue
+            if route is None or r.path_xy is None or ns in self.state.plan.failures:
+                out[ns] = Decision(0.0)  # off the graph or failed: stands for the others
+                continue
+            last, holders = frontier(self.state.routes, ns)
+            plan = self.state.plan.plans[ns]
+            free_to_goal = last == len(route.nodes) - 1 and plan.complete and not plan.queued
+            limit = None if free_to_goal else self._limit(graph, route, i, last)
+            if limit == 0.0 and holders:  # stopped at its frontier: it waits for them (wait-for edges)
+                waits[ns] = holders
+            if limit == 0.0:
+                self.waits[ns] = self.waits.get(ns, 0) + 1
+                r.waiting_since_ns = r.waiting_since_ns if r.waiting_since_ns is not None else t_ns
+            else:
+                r.waiting_since_ns = None
+            out[ns] = Decision(limit, tuple(holders) if limit == 0.0 else (), path_xy=r.path_xy)
+        self._check_deadlock(t_ns, waits)
+        return out
+
+    def _limit(self, graph: RouteGraph, route: Route, intent: Intent, last: int) -> float | None:
+        """Speed limit that stops the robot on vertex ``last`` (the last one it may enter)."""
+        xy = np.asarray(intent.pose_xyyaw[:2])
+        pts = graph.xy[route.nodes[route.progress + 1 : last + 1]]
+        if len(pts):
+            rest = float(np.linalg.norm(pts[0] - xy) + np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+        else:
+            rest = 0.0
+        if rest <= 0.5 * self.config.reach_m:
+            return 0.0
+        if rest >= self.config.brake_m:
+            return None
+        return max(0.05, self.config.speed_mps * rest / self.config.brake_m)
+
+    def _check_deadlock(self, t_ns: int, waits: dict[str, list[str]]) -> None:
+        """Count a deadlock (and replan at the next tick) on a wait-for cycle or a wait longer than
+        deadlock_after_s; the replan plans around the robots that stopped."""
+        bound = self.config.deadlock_after_s * NS_PER_S
+        long_wait = any(
+            (r := self._robots[ns]).waiting_since_ns is not None
+            and t_ns - r.waiting_since_ns > bound
+            and all(t_ns - self._robots[h].moved_at_ns > bound for h in holders if h in self._robots)
+            for ns, holders in waits.items()
+        )
+        if wait_cycles(waits) or long_wait:
+            self.state.deadlocks += 1
+            self._force_replan = True
+            for r in self._robots.values():
+                r.waiting_since_ns = None

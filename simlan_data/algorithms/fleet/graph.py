@@ -1,0 +1,150 @@
+"""The route graph of a warehouse, derived from its occupancy grid (any layout, nothing hand-placed).
+
+The floor is cut into square blocks of ``spacing_m``. In each block the free cell of greatest
+clearance (capped, ties towards the block centre) becomes a node: in an aisle narrower than a
+block that is the aisle's centre line (the medial axis, where clearance peaks), in open floor the
+block centre. Nodes of neighbouring blocks (8-neighbourhood) are joined where the straight segment
+between them keeps the robot's radius from every obstacle. The result is a sampled medial axis of
+narrow passages plus a lattice of lanes over open floor.
+
+Each node keeps its clearance: a robot may turn in place only at a node whose clearance covers its
+swept circle (``RouteGraph.turnable``). Node kinds follow from the graph: ``end`` (one edge),
+``lane`` (two), ``junction`` (three or more: an intersection or a passing place).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
+
+from simlan_data.algorithms.occupancy import OccupancyGrid
+
+_NEIGHBOURS = ((0, 1), (1, -1), (1, 0), (1, 1))  # half of the 8-neighbourhood: each pair once
+
+
+@dataclass(frozen=True)
+class RouteGraph:
+    """Nodes (xy, clearance) and undirected edges of the route graph."""
+
+    xy: NDArray[np.float64]  # (N, 2) node positions in the map frame
+    clearance_m: NDArray[np.float64]  # (N,) distance from each node to the nearest obstacle
+    edges: NDArray[np.int64]  # (E, 2) node pairs, u < v
+    radius_m: float  # the robot radius the graph was built for
+
+    @property
+    def size(self) -> int:
+        return len(self.xy)
+
+    @cached_property
+    def lengths_m(self) -> NDArray[np.float64]:
+        """(E,) edge lengths."""
+        return np.linalg.norm(self.xy[self.edges[:, 0]] - self.xy[self.edges[:, 1]], axis=1)
+
+    @cached_property
+    def neighbours(self) -> list[list[int]]:
+        """Adjacency lists (sorted: deterministic searches)."""
+        adj: list[list[int]] = [[] for _ in range(self.size)]
+        for u, v in self.edges.tolist():
+            adj[u].append(v)
+            adj[v].append(u)
+        return [sorted(a) for a in adj]
+
+    @cached_property
+    def matrix(self) -> csr_matrix:
+        """Symmetric sparse matrix of edge lengths (scipy.sparse.csgraph's input)."""
+        u, v = self.edges[:, 0], self.edges[:, 1]
+        data = np.concatenate([self.lengths_m, self.lengths_m])
+        return csr_matrix((data, (np.concatenate([u, v]), np.concatenate([v, u]))), shape=(self.size,) * 2)
+
+    @cached_property
+    def components(self) -> NDArray[np.int32]:
+        """Connected-component label of every node."""
+        return connected_components(self.matrix, directed=False)[1]
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        return cKDTree(self.xy)
+
+    def kinds(self) -> list[str]:
+        """``end``, ``lane`` or ``junction`` per node (from its number of edges)."""
+        degree = np.array([len(a) for a in self.neighbours])
+        return ["end" if d <= 1 else "lane" if d == 2 else "junction" for d in degree]
+
+    def turnable(self, reach_m: float) -> NDArray[np.bool_]:
+        """Nodes where a robot whose footprint reaches ``reach_m`` from its centre turns in place
+        without sweeping into an obstacle."""
+        return self.clearance_m >= reach_m
+
+    def nearest(self, xy: tuple[float, float], *, within_m: float) -> int | None:
+        """The node nearest to ``xy`` if one lies within ``within_m``, else None."""
+        dist, index = self.tree.query(np.asarray(xy, dtype=float))
+        return int(index) if np.isfinite(dist) and dist <= within_m else None
+
+    def distances_to(self, node: int) -> NDArray[np.float64]:
+        """Shortest route length from every node to ``node`` (inf where unreachable)."""
+        return dijkstra(self.matrix, directed=False, indices=node)
+
+
+def build_route_graph(
+    grid: OccupancyGrid, *, radius_m: float, spacing_m: float, reach_m: float | None = None
+) -> RouteGraph:
+    """The route graph of ``grid`` for robots of radius ``radius_m`` (centre at least that far from
+    obstacles); ``reach_m`` caps the clearance a node seeks (default: radius + half a block)."""
+    clearance = grid.clearance_m().astype(np.float64)
+    res = grid.resolution_m
+    b = max(1, round(spacing_m / res))
+    rows, cols = clearance.shape
+    br, bc = -(-rows // b), -(-cols // b)
+    padded = np.zeros((br * b, bc * b))
+    padded[:rows, :cols] = clearance
+    cap = (reach_m if reach_m is not None else radius_m) + 0.5 * spacing_m
+    # score: clearance up to the cap, then closeness to the block centre (a tiny tie-breaker)
+    offs = (np.arange(b) - (b - 1) / 2.0) ** 2
+    centre_pen = 1e-4 * (offs[:, None] + offs[None, :]) * res
+    score = np.minimum(padded, cap).reshape(br, b, bc, b).transpose(0, 2, 1, 3) - centre_pen
+    free = (padded >= radius_m).reshape(br, b, bc, b).transpose(0, 2, 1, 3)
+    score = np.where(free, score, -np.inf).reshape(br, bc, b * b)
+    best = score.argmax(axis=2)
+    has = np.isfinite(np.take_along_axis(score, best[..., None], axis=2)[..., 0])
+    block_r, block_c = np.nonzero(has)
+    cell_r = block_r * b + best[block_r, block_c] // b
+    cell_c = block_c * b + best[block_r, block_c] % b
+    xy = grid.to_xy(np.stack([cell_r, cell_c], axis=1))
+    index = -np.ones((br, bc), dtype=np.int64)
+    index[block_r, block_c] = np.arange(len(block_r))
+    edges = _free_edges(index, xy, clearance >= radius_m, grid)
+    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m)
+
+
+def _free_edges(
+    index: NDArray[np.int64], xy: NDArray[np.float64], free: NDArray[np.bool_], grid: OccupancyGrid
+) -> NDArray[np.int64]:
+    """Pairs of nodes in neighbouring blocks whose straight segment stays on free cells."""
+    pairs = []
+    br, bc = index.shape
+    for dr, dc in _NEIGHBOURS:
+        r0, r1, c0, c1 = max(0, -dr), br - max(0, dr), max(0, -dc), bc - max(0, dc)
+        a = index[r0:r1, c0:c1]
+        b = index[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
+        ok = (a >= 0) & (b >= 0)
+        pairs.append(np.stack([a[ok], b[ok]], axis=1))
+    cand = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
+    if not len(cand):
+        return cand
+    p, q = xy[cand[:, 0]], xy[cand[:, 1]]
+    n = max(2, int(np.ceil(np.linalg.norm(q - p, axis=1).max() / (0.5 * grid.resolution_m))) + 1)
+    t = np.linspace(0.0, 1.0, n)[None, :, None]
+    pts = p[:, None, :] + t * (q - p)[:, None, :]
+    rows = np.floor((pts[..., 1] - grid.origin_xy_m[1]) / grid.resolution_m).astype(np.int64)
+    cols = np.floor((pts[..., 0] - grid.origin_xy_m[0]) / grid.resolution_m).astype(np.int64)
+    inside = (rows >= 0) & (cols >= 0) & (rows < free.shape[0]) & (cols < free.shape[1])
+    ok = inside.all(axis=1)
+    ok[ok] = free[rows[ok].clip(0), cols[ok].clip(0)].all(axis=1)
+    out = np.sort(cand[ok], axis=1)
+    return out[np.lexsort((out[:, 1], out[:, 0]))]

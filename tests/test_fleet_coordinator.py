@@ -1,0 +1,222 @@
+"""The fleet coordinator (algorithms/coordinator=fleet) at algorithm level: a kinematic fleet of
+point robots follows the coordinator's routes under its speed limits, tick by tick, on small
+synthetic layouts and on the real layout's route graph. Fast, no simulator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from simlan_data.algorithms.coordinator import Intent
+from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator, build_route_graph
+from simlan_data.algorithms.fleet.coordinator import reach_of
+from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
+from simlan_data.algorithms.roles import CoordinatorContext
+from simlan_data.errors import ConfigError
+from simlan_data.world.layout import load_layout
+
+RES = 0.1
+JACKAL = (-0.33, 0.33, -0.33, 0.33)
+SAFETY_M = 0.3
+
+
+def grid_from_boxes(
+    size_xy: tuple[float, float], boxes: list[tuple[float, float, float, float]]
+) -> OccupancyGrid:
+    """A walled floor of ``size_xy`` metres with obstacle boxes (x0, y0, x1, y1)."""
+    cols, rows = round(size_xy[0] / RES), round(size_xy[1] / RES)
+    occ = np.zeros((rows, cols), bool)
+    occ[0, :] = occ[-1, :] = occ[:, 0] = occ[:, -1] = True
+    for x0, y0, x1, y1 in boxes:
+        occ[round(y0 / RES) : round(y1 / RES), round(x0 / RES) : round(x1 / RES)] = True
+    return OccupancyGrid(occ, (0.0, 0.0), RES)
+
+
+class Fleet:
+    """Point robots driving the coordinator's paths (Decision.path_xy) at its speed limits."""
+
+    def __init__(
+        self, grid: OccupancyGrid, robots: dict, *, stopped: tuple[str, ...] = (), dwell_s: float = 0.0
+    ):
+        self.coord = FleetCoordinator(FleetConfig(), CoordinatorContext(SAFETY_M, grid))
+        self.robots = {
+            n: {"pose": list(p), "goals": [tuple(g) for g in goals], "fp": fp, "path": None, "s": 0.0}
+            for n, (p, goals, fp) in robots.items()
+        }
+        self.stopped, self.dwell_s = set(stopped), dwell_s
+        self.t_s, self.trace, self.arrivals = 0.0, [], []  # arrivals: (t, robot, goal)
+        self._dwell: dict[str, float] = {}
+
+    def intents(self) -> list[Intent]:
+        return [
+            Intent(n, k + 1, tuple(r["pose"]), r["fp"], None, goal_xy=r["goals"][0] if r["goals"] else None)
+            for k, (n, r) in enumerate(sorted(self.robots.items()))
+        ]
+
+    def step(self, dt: float = 0.1, speed: float = 0.5) -> None:
+        decisions = self.coord.decide(round(self.t_s * 1e9), self.intents())
+        for n, r in self.robots.items():
+            d = decisions.get(n)
+            if n in self.stopped or not r["goals"] or d is None or self._dwelling(n, r):
+                continue
+            if d.path_xy is not None and (r["path"] is None or not np.array_equal(r["path"], d.path_xy)):
+                r["path"], r["s"] = d.path_xy, 0.0
+            if r["path"] is None:
+                continue
+            v = speed if d.speed_limit_mps is None else min(speed, d.speed_limit_mps)
+            cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(r["path"], axis=0), axis=1))])
+            r["s"] = min(cum[-1], r["s"] + v * dt)
+            xy = np.array([np.interp(r["s"], cum, r["path"][:, i]) for i in (0, 1)])
+            r["pose"] = [float(xy[0]), float(xy[1]), r["pose"][2]]
+            if r["s"] >= cum[-1] - 1e-9 and np.hypot(*(xy - r["goals"][0])) < 0.3:
+                self.arrivals.append((self.t_s, n, r["goals"][0]))
+                self._dwell[n] = self.t_s + self.dwell_s
+                r["path"] = None
+        self.trace.append({n: tuple(r["pose"][:2]) for n, r in self.robots.items()})
+        self.t_s += dt
+
+    def _dwelling(self, n: str, r: dict) -> bool:
+        """At a goal for dwell_s (served at a dock), then on to the next goal."""
+        if n not in self._dwell:
+            return False
+        if self.t_s < self._dwell[n]:
+            return True
+        del self._dwell[n]
+        r["goals"].pop(0)
+        return not r["goals"]
+
+    def run(self, seconds: float) -> None:
+        for _ in range(round(seconds / 0.1)):
+            self.step()
+            if all(not r["goals"] or n in self.stopped for n, r in self.robots.items()):
+                return
+
+    def done(self, n: str) -> bool:
+        return not self.robots[n]["goals"]
+
+    def min_gap_m(self) -> float:
+        """The smallest distance between two robots' swept circles over the run."""
+        names = sorted(self.robots)
+        reach = {n: reach_of(self.robots[n]["fp"]) for n in names}
+        xy = np.array([[snap[n] for n in names] for snap in self.trace])  # (T, R, 2)
+        gaps = [
+            np.linalg.norm(xy[:, i] - xy[:, j], axis=1).min() - reach[a] - reach[b]
+            for i, a in enumerate(names)
+            for j, b in enumerate(names)
+            if i < j
+        ]
+        return float(min(gaps))
+
+    def path(self, n: str) -> np.ndarray:
+        return np.array([snap[n] for snap in self.trace])
+
+
+def test_head_on_in_a_single_lane_aisle_one_yields_at_a_passing_place() -> None:
+    # a 14 m aisle 2.2 m wide (one lane for these robots) between two open areas
+    grid = grid_from_boxes((24, 8), [(5, 0, 19, 3), (5, 5.2, 19, 8)])
+    fleet = Fleet(grid, {"a": ((2, 4, 0.0), [(22.5, 4)], JACKAL), "b": ((22, 4, np.pi), [(1.5, 4)], JACKAL)})
+    fleet.run(150)
+    assert fleet.done("a") and fleet.done("b")
+    assert fleet.min_gap_m() >= SAFETY_M
+    in_aisle = lambda p: (p[:, 0] > 5) & (p[:, 0] < 19)  # noqa: E731
+    a, b = fleet.path("a"), fleet.path("b")
+    assert not (in_aisle(a) & in_aisle(b)).any()  # never both in the lane
+    # the one that yields leaves the lane's line at the aisle's end while the other comes through
+    assert max(np.abs(a[:, 1] - 4.1).max(), np.abs(b[:, 1] - 4.1).max()) > 1.0
+    assert fleet.coord.state.deadlocks == 0
+
+
+def test_four_way_intersection_one_robot_at_a_time_and_all_arrive() -> None:
+    # two corridors 2.4 m wide crossing at (12, 12), open squares at the four ends
+    blocks = [(3, 3, 10.8, 10.8), (13.2, 3, 21, 10.8), (3, 13.2, 10.8, 21), (13.2, 13.2, 21, 21)]
+    grid = grid_from_boxes((24, 24), blocks)
+    robots = {
+        "n": ((12, 22.5, -np.pi / 2), [(12, 1.5)], JACKAL),
+        "s": ((12, 1.5, np.pi / 2), [(12, 22.5)], JACKAL),
+        "e": ((22.5, 12, np.pi), [(1.5, 12)], JACKAL),
+        "w": ((1.5, 12, 0.0), [(22.5, 12)], JACKAL),
+    }
+    fleet = Fleet(grid, robots)
+    fleet.run(300)
+    assert all(fleet.done(n) for n in robots)
+    assert fleet.min_gap_m() >= SAFETY_M
+    inside = np.array([[np.hypot(x - 12, y - 12) < 1.2 for (x, y) in snap.values()] for snap in fleet.trace])
+    assert inside.sum(axis=1).max() == 1  # the intersection held by one robot at a time
+    assert fleet.coord.state.deadlocks == 0
+
+
+def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
+    # a block in the middle: two aisles (y 1-3.2 and y 6.8-9); the short way is the lower aisle
+    grid = grid_from_boxes((20, 10), [(5, 3.2, 15, 6.8), (5, 0, 15, 1.0), (5, 9.0, 15, 10)])
+    robots = {
+        "a": ((2, 2.1, 0.0), [(18, 2.1)], JACKAL),
+        "x": ((10, 2.1, 0.0), [(18, 3)], JACKAL),  # stopped by safety in the lower aisle
+    }
+    fleet = Fleet(grid, robots, stopped=("x",))
+    fleet.run(150)
+    assert fleet.done("a")
+    assert fleet.path("a")[:, 1].max() > 6.8  # it took the upper aisle
+    assert fleet.min_gap_m() >= SAFETY_M
+
+
+def test_dock_queue_served_in_order_waiting_outside() -> None:
+    grid = grid_from_boxes((20, 14), [(0, 11, 8.5, 14), (11.5, 11, 20, 14)])  # the dock: a bay at the top
+    dock = (10.0, 12.5)
+    robots = {
+        "a": ((3, 3, 0.0), [dock, (2, 8)], JACKAL),
+        "b": ((10, 2, 0.0), [dock, (10, 2)], JACKAL),
+        "c": ((17, 3, 0.0), [dock, (18, 8)], JACKAL),
+    }
+    fleet = Fleet(grid, robots, dwell_s=5.0)
+    fleet.run(400)
+    assert all(fleet.done(n) for n in robots)
+    served = [n for (_, n, g) in fleet.arrivals if g == dock]
+    assert served == ["a", "b", "c"]  # in priority order
+    assert fleet.min_gap_m() >= SAFETY_M
+    # while one is served, the others wait outside the bay (below its mouth)
+    for t, n, g in fleet.arrivals:
+        if g != dock:
+            continue
+        snap = fleet.trace[round(t / 0.1) - 1]
+        assert all(snap[o][1] < 11.0 for o in robots if o != n)
+
+
+def test_unreachable_goal_is_reported_and_others_are_unaffected() -> None:
+    grid = grid_from_boxes((20, 10), [(14, 5, 20, 5.3), (14, 5.3, 14.3, 10)])  # a closed room, top right
+    robots = {
+        "a": ((2, 2, 0.0), [(18, 2)], JACKAL),
+        "u": ((2, 8, 0.0), [(17, 8)], JACKAL),  # inside the closed room: no way in
+        "c": ((18, 3.5, np.pi), [(2, 4)], JACKAL),
+    }
+    fleet = Fleet(grid, robots)
+    fleet.run(150)
+    assert fleet.coord.state.failures == {"u": "unreachable"}
+    assert fleet.done("a") and fleet.done("c")
+    assert not fleet.done("u")
+    assert fleet.min_gap_m() >= SAFETY_M
+
+
+def test_real_layout_route_graph_has_aisles_junctions_and_turn_limits() -> None:
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
+    graph = build_route_graph(grid, radius_m=0.45 + 0.25, spacing_m=1.0, reach_m=1.31)
+    kinds = graph.kinds()
+    assert np.bincount(graph.components).max() > 0.95 * graph.size  # one connected floor
+    assert kinds.count("lane") > 20 and kinds.count("junction") > 1000
+    # the narrow aisle between the two upper shelf rows (y about 5.4) is one lane of nodes, where
+    # the forklift (reach 1.31 m) may not turn in place
+    aisle = (np.abs(graph.xy[:, 1] - 5.4) < 0.6) & (graph.xy[:, 0] > -20) & (graph.xy[:, 0] < 10)
+    assert aisle.sum() > 20
+    assert {kinds[i] for i in np.flatnonzero(aisle)} <= {"lane", "junction"}
+    assert sum(kinds[i] == "lane" for i in np.flatnonzero(aisle)) > 15
+    assert not graph.turnable(1.31)[aisle].any()
+    assert graph.turnable(1.31).sum() > 0.5 * graph.size
+
+
+def test_config_rejects_a_bad_value_naming_the_key() -> None:
+    with pytest.raises(ConfigError, match=r"algorithms\.coordinator\.spacing_m"):
+        FleetConfig(spacing_m=0.0)
+
+
+def test_fleet_coordinator_needs_the_grid() -> None:
+    with pytest.raises(ConfigError, match="needs the occupancy grid"):
+        FleetCoordinator(FleetConfig(), CoordinatorContext(0.6))
