@@ -9,8 +9,11 @@ from simlan_data.errors import ConfigError
 _KEY = "algorithms.coordinator."
 
 
-def _within(name: str, value: float, low: float, high: float, unit: str, default: float) -> None:
-    if not low < value <= high:
+def _within(
+    name: str, value: float, low: float, high: float, unit: str, default: float, *, zero_ok: bool = False
+) -> None:
+    """Refuse ``value`` outside (low, high] ([low, high] with ``zero_ok``), naming the key."""
+    if not (low <= value <= high if zero_ok else low < value <= high):
         raise ConfigError.invalid(
             _KEY + name, value, f"must be within {low}..{high} {unit}", f"use {default}"
         )
@@ -35,10 +38,10 @@ class FleetConfig:
 
     def __post_init__(self) -> None:
         _within("spacing_m", self.spacing_m, 0.2, 5.0, "m", 1.0)
-        _within("lane_clearance_m", self.lane_clearance_m, -1e-9, 2.0, "m", 0.25)
+        _within("lane_clearance_m", self.lane_clearance_m, 0.0, 2.0, "m", 0.25, zero_ok=True)
         _within("speed_mps", self.speed_mps, 0.0, 5.0, "m/s", 0.5)
         _within("horizon_s", self.horizon_s, 0.0, 1800.0, "s", 90.0)
-        _within("safety_m", self.safety_m, -1e-9, 5.0, "m", 0.0)
+        _within("safety_m", self.safety_m, 0.0, 5.0, "m", 0.0, zero_ok=True)
         _within("reach_m", self.reach_m, 0.0, 2.0, "m", 0.35)
         _within("brake_m", self.brake_m, 0.0, 10.0, "m", 1.0)
         _within("stall_s", self.stall_s, 0.0, 600.0, "s", 3.0)
