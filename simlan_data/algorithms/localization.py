@@ -61,6 +61,11 @@ class LocalizerParams:
     processing_delay_s: float = 0.0  # image capture -> fix usable by the filter
     accel_noise_mps2: float = 0.25  # how far the robot strays from its commanded speed (m/s^2)
     yaw_accel_noise_rps2: float = 0.4  # and from its commanded yaw rate (rad/s^2)
+    # how fast a robot reaches a new commanded speed where its marker mount does not say (m/s^2;
+    # 0: at once). A robot told to stop brakes over v^2 / 2a: 6.7 cm from 1 m/s for a pallet truck
+    # (7.5 m/s^2, measured); a filter that stops at once falls that far behind and gates out the
+    # next fixes (docs/benchmarks/gpss.md)
+    accel_mps2: float = 7.5
     gate_sigma: float = 8.0  # fixes farther than this (Mahalanobis) from the prediction are outliers
     reset_after_rejected: int = 3  # so many outliers in a row: the filter is wrong (a robot stopped
     # by a collision), restart it from the next fix
@@ -85,6 +90,8 @@ class LocalizerParams:
             )
         if not 0 <= self.processing_delay_s <= 5:
             raise ConfigError.invalid(key + "processing_delay_s", self.processing_delay_s, "must be within 0..5 s", "use 0")
+        if not self.accel_mps2 >= 0:
+            raise ConfigError.invalid(key + "accel_mps2", self.accel_mps2, "must be >= 0 (0: at once)", "use 7.5")
         if len(self.bias_m) != 2:
             raise ConfigError.invalid(key + "bias_m", list(self.bias_m), "expected [x_m, y_m]", "use [0.0, 0.0]")
         object.__setattr__(self, "bias_m", (float(self.bias_m[0]), float(self.bias_m[1])))
@@ -131,10 +138,13 @@ class UnicycleEKF:
 
     Between fixes the robot moves as commanded when its velocity commands are known (the central
     GPSS node sent them), else at constant speed and yaw rate; the process noise covers how
-    well the robot tracks them.
+    well the robot tracks them. With ``accel_mps2`` > 0 its speed reaches a new command at that
+    rate (a robot stopped by its safety layer brakes over a few centimetres: a filter that
+    stopped at once would fall behind by as much), else at once.
     """
 
-    def __init__(self, accel_noise: float, yaw_accel_noise: float) -> None:
+    def __init__(self, accel_noise: float, yaw_accel_noise: float, accel_mps2: float = 0.0) -> None:
+        self.accel_mps2 = float(accel_mps2)
         self.q = np.array([accel_noise**2, yaw_accel_noise**2])
         self._Q = np.diag(self.q)
         self.x = np.zeros(5)
@@ -188,14 +198,42 @@ class UnicycleEKF:
         for a, b in itertools.pairwise(times):
             active = [c for c in self.commands if c[0] <= a]
             if active:
-                x[3], x[4] = active[-1][1], active[-1][2]
-            x, P = self._propagate(x, P, (b - a) / NS_PER_S)
+                x, P = self._follow(x, P, (b - a) / NS_PER_S, active[-1][1], active[-1][2])
+            else:
+                x, P = self._propagate(x, P, (b - a) / NS_PER_S)
         self._memo = (t_ns, x.copy(), P.copy())
         return x, P
 
+    def _follow(
+        self, x: NDArray[np.float64], P: NDArray[np.float64], dt: float, v_cmd: float, w_cmd: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Move by ``dt`` under the command (v_cmd, w_cmd): the speed reaches v_cmd at
+        ``accel_mps2`` (at once if 0), travelling at the ramp's mean speed while it changes."""
+        x[4] = w_cmd
+        gap = v_cmd - float(x[3])
+        if self.accel_mps2 <= 0 or gap == 0.0:
+            x[3] = v_cmd
+            return self._propagate(x, P, dt)
+        ramp_s = abs(gap) / self.accel_mps2
+        h = min(dt, ramp_s)
+        v_end = v_cmd if h == ramp_s else float(x[3]) + np.copysign(self.accel_mps2 * h, gap)
+        x[3] = 0.5 * (float(x[3]) + v_end)  # (a straight ramp's distance exactly)
+        x, P = self._propagate(x, P, h)
+        x[3] = v_end
+        if dt > h:
+            x, P = self._propagate(x, P, dt - h)
+        return x, P
+
+    def _command_at(self, t_ns: int) -> tuple[float, float] | None:
+        active = [c for c in self.commands if c[0] <= t_ns]
+        return (active[-1][1], active[-1][2]) if active else None
+
     def reset(self, fix: PoseFix) -> None:
         self._memo = None
-        self.x = np.array([fix.x_m, fix.y_m, fix.yaw_rad, 0.0, 0.0])
+        # a robot first seen (or found again) moves as last commanded, if known: starting it from
+        # rest would make the filter brake it, then lag behind while the speed ramps up again
+        v, w = (self._command_at(fix.stamp_ns) or (0.0, 0.0)) if self.accel_mps2 > 0 else (0.0, 0.0)
+        self.x = np.array([fix.x_m, fix.y_m, fix.yaw_rad, v, w])
         self.P = np.diag([fix.sigma_xy_m**2, fix.sigma_xy_m**2, fix.sigma_yaw_rad**2, 1.0, 1.0])
         self.t_ns = fix.stamp_ns
 
@@ -289,7 +327,12 @@ class Localizer:
         self._by_marker = {m.marker_id: m for m in self.mounts}
         self._tracks = {
             m.namespace: _Track(
-                m, UnicycleEKF(self.params.accel_noise_mps2, self.params.yaw_accel_noise_rps2)
+                m,
+                UnicycleEKF(
+                    self.params.accel_noise_mps2,
+                    self.params.yaw_accel_noise_rps2,
+                    self.params.accel_mps2 if m.accel_mps2 is None else m.accel_mps2,
+                ),
             )
             for m in self.mounts
         }

@@ -28,6 +28,9 @@ class MarkerMount:
     size_m: float
     height_m: float  # marker face above the floor
     offset_xy_m: tuple[float, float]  # marker centre in base_link
+    # how fast the robot reaches a commanded speed (its drive's braking on an emergency stop):
+    # the localizer's motion model; None: the localizer's own accel_mps2
+    accel_mps2: float | None = None
 
 
 @dataclass(frozen=True)

@@ -111,6 +111,7 @@ def _marker_mounts(agents: list[AgentPlan]) -> list[MarkerMount]:
             MARKER_SIZE_M,
             a.kind.marker_xyz[2],
             (a.kind.marker_xyz[0], a.kind.marker_xyz[1]),
+            a.kind.accel_mps2,
         )
         for a in agents
         if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"

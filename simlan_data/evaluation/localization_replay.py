@@ -99,6 +99,7 @@ def marker_mounts(config: dict[str, Any]) -> tuple[list[MarkerMount], dict[str, 
                 MARKER_SIZE_M,
                 kind.marker_xyz[2],
                 (kind.marker_xyz[0], kind.marker_xyz[1]),
+                kind.accel_mps2,
             )
         )
     return mounts, {}

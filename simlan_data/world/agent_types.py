@@ -34,6 +34,9 @@ class AgentType:
     caster_links: tuple[str, ...] = ()
     wheel_friction: float = 1.0
     default_speed_mps: float = 1.0
+    # how fast the drive reaches a commanded speed, braking included (measured on the simulated
+    # body: torque- or grip-limited); the localizer's motion model brakes the estimate so
+    accel_mps2: float = 7.5
 
     @property
     def has_marker(self) -> bool:
@@ -72,6 +75,7 @@ AGENT_TYPES: dict[str, AgentType] = {
         marker_xyz=(-0.8, 0.0, 1.30),
         footprint_m=(-1.15, 0.95, -0.45, 0.45),
         caster_links=_TRUCK_CASTERS,
+        accel_mps2=6.7,  # (mast and counterweight: heavier than the pallet truck)
     ),
     # Clearpath Jackal-sized: 0.51 x 0.43 m, marker on a plate 0.55 m up
     "jackal": AgentType(
@@ -88,6 +92,7 @@ AGENT_TYPES: dict[str, AgentType] = {
         footprint_m=(-0.33, 0.33, -0.33, 0.33),
         caster_links=("front_caster", "rear_caster"),
         default_speed_mps=1.0,
+        accel_mps2=5.0,  # (grip-limited: the casters carry part of its weight)
     ),
     "humanoid": AgentType(
         "humanoid",
