@@ -129,19 +129,27 @@ def plan_fleet(
     order = [r.name for r in requests]
     by_name = {r.name: r for r in requests}
     promoted: set[str] = set()
+    standing: set[str] = set()  # failed even when first: stands still, for everyone
     while True:
-        result = _plan_in_order(graph, [by_name[n] for n in order], obstacles, timing)
-        failed = [n for n in order if n in result.failures and n not in promoted]
+        result = _plan_in_order(graph, [by_name[n] for n in order], obstacles, timing, standing)
+        failed = [n for n in order if n in result.failures and n not in standing]
         if not failed:
             result.order = order
             return result
-        first = failed[0]  # priority inheritance: it goes first, everyone is planned again
-        promoted.add(first)
+        first = failed[0]
+        if first in promoted:  # no plan even first: the others must plan around where it stands
+            standing.add(first)
+            continue
+        promoted.add(first)  # priority inheritance: it goes first, everyone is planned again
         order = [first] + [n for n in order if n != first]
 
 
 def _plan_in_order(
-    graph: RouteGraph, requests: list[Request], obstacles: list[Obstacle], timing: Timing
+    graph: RouteGraph,
+    requests: list[Request],
+    obstacles: list[Obstacle],
+    timing: Timing,
+    standing: set[str],
 ) -> FleetPlan:
     table = Reservations(timing.horizon)
     for o in obstacles:
@@ -151,6 +159,10 @@ def _plan_in_order(
     for r in requests:  # robots that cannot be planned stand where they are, for everyone
         if r.goal is None or graph.components[r.goal] != graph.components[r.start]:
             out.failures[r.name] = "unreachable"
+            table.add_plan(graph, [r.start], r.radius_m)
+        elif r.name in standing:
+            out.failures[r.name] = "blocked"
+            out.plans[r.name] = RobotPlan(r.name, [r.start], r.start, complete=False)
             table.add_plan(graph, [r.start], r.radius_m)
         else:
             pending.append(r)
