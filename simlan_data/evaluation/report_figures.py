@@ -9,7 +9,7 @@ alike); events in ``EVENT_COLOURS``.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -271,28 +271,8 @@ def draw_timeline(fig: Any, series: RunSeries, _floor: Any | None = None) -> boo
                 label="estimated",
             )
         _shade_safety(ax, [e for e in series.events if e.namespace == a.namespace], series.duration_s)
-        for t in a.goals_reached_s:
-            ax.axvline(t, color="#2ca02c", lw=1.2)
-            ax.annotate(
-                "goal",
-                (t, 1.0),
-                xycoords=("data", "axes fraction"),
-                fontsize=7,
-                color="#2ca02c",
-                xytext=(2, -10),
-                textcoords="offset points",
-            )
-        for t in a.goals_failed_s:
-            ax.axvline(t, color="#d62728", lw=1.2, ls=":")
-            ax.annotate(
-                "goal failed",
-                (t, 1.0),
-                xycoords=("data", "axes fraction"),
-                fontsize=7,
-                color="#d62728",
-                xytext=(2, -10),
-                textcoords="offset points",
-            )
+        _mark_times(ax, a.goals_reached_s, "goal", "#2ca02c", "-")
+        _mark_times(ax, a.goals_failed_s, "goal failed", "#d62728", ":")
         for t in a.collisions_s:
             ax.plot(t, 0.0, marker="X", color="black", ms=9, ls="none")
         ax.set_ylabel(f"{a.namespace}\nspeed (m/s)", fontsize=8)
@@ -308,6 +288,21 @@ def draw_timeline(fig: Any, series: RunSeries, _floor: Any | None = None) -> boo
     fig.legend(handles, labels, fontsize=7, loc="upper right", ncols=3, frameon=False)
     _margins(fig, top=0.55)
     return True
+
+
+def _mark_times(ax: Any, times: Sequence[float], text: str, colour: str, style: str) -> None:
+    """A labelled vertical line at each time (goals reached, goals failed)."""
+    for t in times:
+        ax.axvline(t, color=colour, lw=1.2, ls=style)
+        ax.annotate(
+            text,
+            (t, 1.0),
+            xycoords=("data", "axes fraction"),
+            fontsize=7,
+            color=colour,
+            xytext=(2, -10),
+            textcoords="offset points",
+        )
 
 
 def _shade_safety(ax: Any, events: list[Any], end_s: float) -> None:
