@@ -20,9 +20,11 @@ from simlan_data.algorithms.birdseye import CanvasSpec
 from simlan_data.algorithms.people import PeopleParams
 from simlan_data.algorithms.posemap.config import PosemapConfig
 from simlan_data.config import collision as collision_scenario
+from simlan_data.config import missions as fleet_missions
 from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms, selected_algorithm
 from simlan_data.config.collision import CollisionScenarioConfig
 from simlan_data.config.live import LiveConfig
+from simlan_data.config.missions import MissionsConfig
 from simlan_data.errors import ConfigError
 from simlan_data.recording.timebase import DEFAULT_EPOCH, parse_epoch
 from simlan_data.world.physics import PhysicsParams
@@ -496,6 +498,7 @@ class Config:
     people: PeopleParams = field(default_factory=PeopleParams)  # person detection (the cameras' segmentation)
     collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
     live: LiveConfig = field(default_factory=LiveConfig)  # a live view in Foxglove (config/live.py)
+    fleet: MissionsConfig = field(default_factory=MissionsConfig)  # scenario=fleet (config/missions.py)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
@@ -594,6 +597,21 @@ def _collision_setup(key: str, *, _root_: DictConfig) -> Any:
     return collision_scenario.resolve(key, section)
 
 
+def _fleet_missions(key: str, *, _root_: DictConfig) -> Any:
+    """``${fleet_missions:KEY}``: scenario=fleet's agents (and docks, chargers) from ``fleet`` and ``seed``."""
+    root = OmegaConf.to_container(_root_, resolve=False)
+    assert isinstance(root, dict)
+    for name in ("fleet", "world", "navigation"):  # (their own interpolations, e.g. a sweep's)
+        root[name] = OmegaConf.to_container(_root_[name], resolve=True)
+    root["seed"] = _root_.seed
+    value = fleet_missions.resolve(key, root)
+    if key == "agents":  # typed, as a spawn list's entries are (a plain dict is refused there)
+        return OmegaConf.create(
+            {ns: OmegaConf.structured(AgentConfig(**agent)) for ns, agent in value.items()}
+        )
+    return value
+
+
 def register_configs(overrides: list[str] | None = None) -> None:
     """Register the schema and every algorithm with Hydra's ConfigStore (conf/config.yaml lists it first).
 
@@ -604,3 +622,5 @@ def register_configs(overrides: list[str] | None = None) -> None:
     register_algorithms(overrides)
     if not OmegaConf.has_resolver("collision_setup"):
         OmegaConf.register_new_resolver("collision_setup", _collision_setup)
+    if not OmegaConf.has_resolver("fleet_missions"):
+        OmegaConf.register_new_resolver("fleet_missions", _fleet_missions)

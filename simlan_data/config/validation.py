@@ -29,6 +29,7 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import (
     ConfigAttributeError,
     ConfigKeyError,
+    InterpolationResolutionError,
     MissingMandatoryValue,
     OmegaConfBaseException,
     ValidationError,
@@ -216,6 +217,11 @@ def resolve_interpolations(cfg: DictConfig) -> DictConfig:
             _first_line(err),
             "give a value of the key's type (an interpolation has to give one too)",
         ) from None
+    except InterpolationResolutionError as err:  # a resolver's own check (scenario=fleet's missions)
+        own = next((e for e in _chain(err) if isinstance(e, SimlanError)), None)
+        if own is None:
+            raise
+        raise own from None
     return resolved
 
 

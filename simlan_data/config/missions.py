@@ -1,0 +1,261 @@
+"""Seeded fleet missions on the real layout (``scenario=fleet``): robots, homes, tasks, shared docks.
+
+The ``fleet`` section says what to generate; the config resolver ``${fleet_missions:agents}``
+turns it, with ``seed``, the layout and ``navigation.clearance_m``, into the ``agents`` section,
+so the run proceeds as any run and its recorded config holds the generated poses and goals::
+
+    fleet section + seed + layout (occupancy grid, clearance per cell)
+        -> spots on free floor reachable from each other (one connected free region)
+        -> docks and chargers (shared: several robots visit them, the coordinator queues them)
+        -> homes (spawn poses, footprints apart) -> per robot: tasks, then home
+
+Every task is two goals: a delivery goes to a pickup by a rack (or a wall), then to one of the docks; a
+charge (every ``charge_every``-th task) goes to one of the chargers, then back home. After its
+tasks a robot returns home, so no robot ends on a shared spot. The fleet metrics count goals
+``2k, 2k+1`` as task ``k`` and a last unpaired goal as the return home.
+
+Reachable means: every spot lies in the largest connected region of floor whose clearance to the
+layout's obstacles is at least the largest footprint's circumscribed radius in the mix plus
+``MARGIN_M`` (so a robot can turn in place on it, and the planner, which keeps half a width plus
+``navigation.clearance_m``, has a path between any two).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
+from simlan_data.errors import ConfigError
+from simlan_data.world.agent_types import AGENT_TYPES, AgentType
+from simlan_data.world.layout import load_layout
+
+__all__ = ["GOALS_PER_TASK", "Missions", "MissionsConfig", "generate_missions", "resolve"]
+
+GOALS_PER_TASK = 2  # pickup -> drop-off (charger -> home for a charge)
+MARGIN_M = 0.15  # spots keep the circumscribed radius plus this from obstacles
+RACK_BAND_M = 0.8  # pickups lie within this of the closest spot to a rack
+SPACING_M = 0.5  # free floor between two homes' (or a home's and a dock's) circumscribed circles
+MAX_ROBOTS = 200
+ROBOT_TYPES = tuple(name for name, t in AGENT_TYPES.items() if t.drive == "diff")
+_bad = ConfigError.invalid
+
+
+@dataclass
+class MissionsConfig:
+    """The ``fleet`` section: what ``scenario=fleet`` generates from ``seed`` (0 robots: nothing)."""
+
+    robots: int = 0  # robots generated (scenario=fleet sets 4); 0: no fleet
+    types: list[str] = field(
+        default_factory=lambda: ["pallet_truck", "jackal", "forklift"]
+    )  # robot i: types[i % n]
+    tasks: int = 2  # tasks per robot (each two goals), then home
+    docks: int = 2  # shared drop-off spots
+    chargers: int = 1  # shared charging spots
+    charge_every: int = 3  # every n-th task of a robot is a charge (0: never)
+    speed_mps: float = 1.0  # every robot's speed
+    area_m: list[float] = field(
+        default_factory=lambda: [-8.0, 34.0, -10.0, 10.0]
+    )  # x0, x1, y0, y1: all spots
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.robots <= MAX_ROBOTS:
+            raise _bad(
+                "fleet.robots",
+                self.robots,
+                f"must be within 0..{MAX_ROBOTS} (0: no fleet)",
+                "use e.g. fleet.robots=4",
+            )
+        if not self.types:
+            raise _bad(
+                "fleet.types", list(self.types), "no robot type", f"list some of {', '.join(ROBOT_TYPES)}"
+            )
+        for name in self.types:
+            if name not in ROBOT_TYPES:
+                raise _bad(
+                    "fleet.types[]",
+                    name,
+                    f"not a robot type ({', '.join(ROBOT_TYPES)})",
+                    "use e.g. pallet_truck",
+                )
+        for key, low, high in (
+            ("tasks", 1, 100),
+            ("docks", 1, 20),
+            ("chargers", 0, 20),
+            ("charge_every", 0, 100),
+        ):
+            if not low <= getattr(self, key) <= high:
+                raise _bad(
+                    f"fleet.{key}", getattr(self, key), f"must be within {low}..{high}", "see docs/fleet.md"
+                )
+        if self.charge_every and not self.chargers:
+            raise _bad(
+                "fleet.charge_every",
+                self.charge_every,
+                "there are no chargers",
+                "set fleet.chargers=1 or charge_every=0",
+            )
+        if not 0 < self.speed_mps <= 3.0:
+            raise _bad("fleet.speed_mps", self.speed_mps, "must be within (0, 3] m/s", "use 1.0")
+        if len(self.area_m) != 4 or not (self.area_m[0] < self.area_m[1] and self.area_m[2] < self.area_m[3]):
+            raise _bad(
+                "fleet.area_m",
+                list(self.area_m),
+                "expected [x0, x1, y0, y1] with x0 < x1, y0 < y1",
+                "use [-8, 34, -10, 10]",
+            )
+
+
+@dataclass(frozen=True)
+class Missions:
+    """What was generated: the ``agents`` section and the shared spots (map frame, metres)."""
+
+    agents: dict[str, dict[str, Any]]
+    docks: list[list[float]]
+    chargers: list[list[float]]
+
+
+@functools.lru_cache(maxsize=4)
+def _floor(layout: str, fidelity: str, resolution_m: float) -> tuple[OccupancyGrid, NDArray[np.float32]]:
+    """The layout's occupancy grid and clearance (cached: the resolver runs several times a run)."""
+    grid = grid_from_world(load_layout(layout, fidelity), resolution_m=resolution_m)
+    return grid, grid.clearance_m()
+
+
+def _spots(
+    grid: OccupancyGrid, clearance: NDArray[np.float32], need_m: float, area: list[float]
+) -> NDArray[np.float64]:
+    """(N, 3) x, y, clearance of the cells in ``area`` with ``need_m`` clearance, in the largest
+    connected region of such floor (over the whole map: a region may leave the area between spots)."""
+    free = clearance >= need_m
+    count, labels = cv2.connectedComponents(free.astype(np.uint8), connectivity=8)
+    if count < 2:
+        return np.zeros((0, 3))
+    largest = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1  # (label 0: the obstacles)
+    cells = np.argwhere(labels == largest)
+    xy = grid.to_xy(cells)
+    inside = (xy[:, 0] >= area[0]) & (xy[:, 0] <= area[1]) & (xy[:, 1] >= area[2]) & (xy[:, 1] <= area[3])
+    return np.column_stack([xy[inside], clearance[cells[inside, 0], cells[inside, 1]]])
+
+
+def _pick_apart(
+    rng: np.random.Generator,
+    candidates: NDArray[np.float64],
+    radii_m: list[float],
+    taken: list[tuple[float, float, float]],
+) -> list[tuple[float, float]]:
+    """Pick one candidate per radius in seeded order, each circle of ``radii_m[k]`` clear of every
+    taken (x, y, radius) circle (``taken`` grows); fewer when the floor has no room left."""
+    picked: list[tuple[float, float]] = []
+    for i in rng.permutation(len(candidates)):
+        if len(picked) == len(radii_m):
+            break
+        x, y = float(candidates[i, 0]), float(candidates[i, 1])
+        radius = radii_m[len(picked)]
+        if taken:
+            t = np.asarray(taken)
+            if np.any(np.hypot(t[:, 0] - x, t[:, 1] - y) < t[:, 2] + radius):
+                continue
+        picked.append((round(x, 2), round(y, 2)))
+        taken.append((x, y, radius))
+    return picked
+
+
+def generate_missions(
+    spec: MissionsConfig,
+    *,
+    seed: int,
+    layout: str = "warehouse_layout.csv",
+    fidelity: str = "default",
+    resolution_m: float = 0.1,
+    clearance_m: float = 0.4,
+) -> Missions:
+    """The fleet's agents (type, home pose, goals, speed) from ``spec`` and ``seed``, deterministically.
+
+    Raises:
+        ConfigError: no robots, or the area's floor cannot hold the robots, docks and chargers apart.
+    """
+    if spec.robots < 1:
+        raise _bad(
+            "fleet.robots",
+            spec.robots,
+            f"must be within 1..{MAX_ROBOTS} for scenario=fleet",
+            "use e.g. fleet.robots=4",
+        )
+    kinds: list[AgentType] = [AGENT_TYPES[spec.types[i % len(spec.types)]] for i in range(spec.robots)]
+    widest = max(k.radius_m for k in kinds)
+    planner_m = max(k.half_width_m for k in kinds) + clearance_m
+    grid, clearance = _floor(layout, fidelity, resolution_m)
+    spots = _spots(grid, clearance, max(widest + MARGIN_M, planner_m), spec.area_m)
+    rng = np.random.default_rng([seed, 23])  # (23: the issue; any constant keeps seeds independent)
+    taken: list[tuple[float, float, float]] = []
+    shared = spec.docks + spec.chargers
+    stations = _pick_apart(rng, spots, [widest + SPACING_M] * shared, taken)
+    homes = _pick_apart(rng, spots, [k.radius_m + SPACING_M / 2 for k in kinds], taken)
+    if len(stations) < shared or len(homes) < spec.robots:
+        raise _bad(
+            "fleet.robots",
+            spec.robots,
+            f"the free floor of fleet.area_m={list(spec.area_m)} holds only {len(homes)} of these robots apart"
+            f" beside {spec.docks} docks and {spec.chargers} chargers",
+            "use fewer robots (or smaller types, or a larger fleet.area_m)",
+        )
+    docks, chargers = stations[: spec.docks], stations[spec.docks :]
+    near_rack = spots[spots[:, 2] <= spots[:, 2].min() + RACK_BAND_M]
+    for x, y, r in taken:  # a pickup keeps clear of homes (robots park there) and shared spots
+        near_rack = near_rack[np.hypot(near_rack[:, 0] - x, near_rack[:, 1] - y) >= r + widest + SPACING_M]
+    if not len(near_rack):
+        raise _bad(
+            "fleet.area_m",
+            list(spec.area_m),
+            "no pickup spot left clear of the homes and docks",
+            "use fewer robots or a larger area",
+        )
+    agents: dict[str, dict[str, Any]] = {}
+    for i, (kind, home) in enumerate(zip(kinds, homes, strict=True)):
+        goals: list[list[float]] = []
+        for t in range(spec.tasks):
+            if spec.charge_every and (t + 1) % spec.charge_every == 0:
+                goals += [list(chargers[int(rng.integers(len(chargers)))]), list(home)]
+            else:
+                x, y, _ = near_rack[int(rng.integers(len(near_rack)))]
+                goals += [
+                    [round(float(x), 2), round(float(y), 2)],
+                    list(docks[int(rng.integers(len(docks)))]),
+                ]
+        if goals[-1] != list(home):
+            goals.append(list(home))
+        yaw = round(float(rng.uniform(-math.pi, math.pi)), 4)
+        agents[f"robot_agent_{i + 1}"] = {
+            "type": kind.name,
+            "pose": [home[0], home[1], yaw],
+            "goals": goals,
+            "speed_mps": float(spec.speed_mps),
+        }
+    return Missions(agents, [list(d) for d in docks], [list(c) for c in chargers])
+
+
+def resolve(key: str, root: Mapping[Any, Any]) -> Any:
+    """Value of ``${fleet_missions:KEY}`` (``agents``, ``docks``, ``chargers``) for a whole config."""
+    section = dict(root.get("fleet") or {})
+    spec = MissionsConfig(**section)
+    world, nav = root.get("world") or {}, root.get("navigation") or {}
+    missions = generate_missions(
+        spec,
+        seed=int(root.get("seed", 0)),
+        layout=str(world.get("layout", "warehouse_layout.csv")),
+        fidelity=str(world.get("fidelity", "default")),
+        resolution_m=float(nav.get("resolution_m", 0.1)),
+        clearance_m=float(nav.get("clearance_m", 0.4)),
+    )
+    values = {"agents": missions.agents, "docks": missions.docks, "chargers": missions.chargers}
+    if key not in values:
+        raise KeyError(f"unknown fleet_missions key {key!r}; known: {', '.join(values)}")
+    return values[key]
