@@ -516,7 +516,7 @@ def localization(ctx: ReplayContext) -> dict[str, float]:
     if frames_out:
         pl.concat(frames_out).write_parquet(ctx.out_dir / "estimates.parquet")
     if ctx.options.get("navigation", True):
-        metrics.update(navigation_metrics(recorded, truth, drives))
+        metrics.update(navigation_metrics(recorded, truth, drives, kinds=kinds))
     return metrics
 
 
@@ -587,5 +587,7 @@ def recording_metrics(reader: RecordingReader, config: dict[str, Any], cameras: 
         tables = estimates_from_recording(reader, [m.namespace for m in mounts])
         visibility = {m.namespace: Visibility(cameras, kinds[m.namespace]) for m in mounts}
         metrics.update(localization_metrics(truth, tables, visibility))
-    metrics.update(navigation_metrics(reader, truth, [ns for ns, k in kinds.items() if k.drive == "diff"]))
+    metrics.update(
+        navigation_metrics(reader, truth, [ns for ns, k in kinds.items() if k.drive == "diff"], kinds=kinds)
+    )
     return metrics

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from functools import cache
 
 from simlan_data.algorithms.navigation import BLOCKED_AFTER_S
+from simlan_data.evaluation.fleet_metrics import DEADLOCK_MOVE_M, DEADLOCK_S, MIN_WAIT_S
 
 __all__ = ["AREAS", "UNITS", "MetricUnit", "area_of", "format_metric", "format_number", "unit_of"]
 
@@ -43,6 +44,24 @@ _COUNT = "count"
 NEVER_OBSERVED = "n/a: never observed"
 
 UNITS: dict[str, MetricUnit] = {
+    # --------------------------------------------------------------------------------- fleet
+    "fleet.robots": MetricUnit(_COUNT, "robots with goals"),
+    "fleet.tasks_total": MetricUnit(_COUNT, "tasks given (two goals each; a last odd goal is home)"),
+    "fleet.tasks_completed": MetricUnit(_COUNT, "tasks whose two goals were reached"),
+    "fleet.missions_done": MetricUnit("yes/no", "every goal of every robot reached"),
+    "fleet.makespan_s": MetricUnit("s", "start to the last goal reached (the run's length if not all were)"),
+    "fleet.tasks_per_hour": MetricUnit("1/h", "tasks completed per hour of makespan", nan="n/a: no time"),
+    "fleet.wait_s_mean": MetricUnit("s", f"mean stand of a robot with a pending goal (>= {MIN_WAIT_S:g} s)"),
+    "fleet.wait_s_max": MetricUnit("s", "longest stand of a robot with a pending goal"),
+    "fleet.wait_share": MetricUnit("%", "share of pending robot-time spent standing", 100.0),
+    "fleet.min_clearance_m": MetricUnit(
+        "cm", "smallest footprint-to-footprint distance between two robots", 100.0, inf="none: one robot"
+    ),
+    "fleet.deadlocks": MetricUnit(
+        _COUNT,
+        f"deadlocks: >= 2 linked robots with pending goals, none moving {DEADLOCK_MOVE_M:g} m in {DEADLOCK_S:g} s",
+    ),
+    "fleet.deadlock_s": MetricUnit("s", "time with a deadlock"),
     # ---------------------------------------------------------------------------- navigation
     **_per_agent("navigation", "goals_reached", MetricUnit(_COUNT, "goals reached")),
     **_per_agent("navigation", "goals_total", MetricUnit(_COUNT, "goals given")),
@@ -159,6 +178,7 @@ UNITS: dict[str, MetricUnit] = {
 
 # the report's sections, in this order; a name's area is its first dotted part
 AREAS: dict[str, str] = {
+    "fleet": "Fleet",
     "navigation": "Navigation",
     "localization": "Localization",
     "safety": "Safety",

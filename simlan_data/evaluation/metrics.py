@@ -24,7 +24,7 @@ that does not say why (format 1.0, or cut short by a crash) counts a failure it 
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from simlan_data.algorithms.markers import marker_corners_in_marker_frame
 from simlan_data.algorithms.navigation import FAILURE_REASONS, failure_reason
 from simlan_data.constants import NS_PER_S
+from simlan_data.evaluation.fleet_metrics import Status, fleet_metrics
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.rotations import wrap_angle
 from simlan_data.recording import schema
@@ -77,6 +78,7 @@ class RecordedRows:
         self.truth: dict[str, list[tuple]] = {}
         self.estimates: dict[str, tuple[list[tuple], list[tuple]]] = {}
         self.navigation: dict[str, tuple[Any, int, bool]] = {}  # last status, collisions, in collision
+        self.statuses: dict[str, list[Status]] = {}  # every status (the fleet metrics' timeline)
         self._handlers: dict[str, tuple[Any, ...]] = {}
         if truth:
             self._handlers[schema.GROUND_TRUTH_POSES] = (self._truth,)
@@ -88,16 +90,17 @@ class RecordedRows:
         for ns in navigation_of:
             topics = schema.agent_topics(ns)
             self.navigation[ns] = (None, 0, False)
+            self.statuses[ns] = []
             self._handlers[topics["navigation"].name] = (self._navigation, ns)
             self._handlers[topics["collision"].name] = (self._collision, ns)
 
     def rows(self) -> tuple[Any, ...]:
         """The rows collected (plain data: to hand to another process, see :meth:`take`)."""
-        return self.truth, self.estimates, self.navigation
+        return self.truth, self.estimates, self.navigation, self.statuses
 
     def take(self, rows: tuple[Any, ...]) -> None:
         """Rows another collector of the same topics collected (its :meth:`rows`)."""
-        self.truth, self.estimates, self.navigation = rows
+        self.truth, self.estimates, self.navigation, self.statuses = rows
 
     @property
     def topics(self) -> list[str]:
@@ -130,6 +133,15 @@ class RecordedRows:
         new_failures = int(status.goals_failed) - sum(failed.values())
         if new_failures > 0:  # (a recording without reasons only ever failed for want of a path)
             failed[failure_reason(str(status.state)) or "unreachable"] += new_failures
+        self.statuses[ns].append(
+            (
+                m.stamp_ns,
+                int(status.goals_total),
+                int(status.goals_reached),
+                int(status.goals_failed),
+                tuple(status.blocked_by),
+            )
+        )
         self.navigation[ns] = (
             (int(status.goals_reached), int(status.goals_total), float(status.planned_length_m), failed),
             hits,
@@ -266,10 +278,15 @@ def localization_metrics(
 
 
 def navigation_metrics(
-    reader: RecordingReader | RecordedRows, truth: dict[str, pl.DataFrame], namespaces: Iterable[str]
+    reader: RecordingReader | RecordedRows,
+    truth: dict[str, pl.DataFrame],
+    namespaces: Iterable[str],
+    *,
+    kinds: Mapping[str, AgentType] | None = None,
 ) -> dict[str, float]:
     """``navigation.*`` from the recorded navigation status, collision sensor and ground truth
-    (read from ``reader``, or already collected)."""
+    (read from ``reader``, or already collected); with the robots' ``kinds`` also ``fleet.*``
+    (:mod:`~simlan_data.evaluation.fleet_metrics`)."""
     namespaces = list(namespaces)
     rows = (
         reader
@@ -316,6 +333,8 @@ def navigation_metrics(
     out["navigation.collisions"] = float(collisions)
     if ratios:
         out["navigation.path_length_ratio"] = float(np.mean(ratios))
+    if kinds is not None:
+        out.update(fleet_metrics(truth, {ns: rows.statuses[ns] for ns in namespaces}, kinds))
     return out
 
 
