@@ -61,11 +61,10 @@ class LocalizerParams:
     processing_delay_s: float = 0.0  # image capture -> fix usable by the filter
     accel_noise_mps2: float = 0.25  # how far the robot strays from its commanded speed (m/s^2)
     yaw_accel_noise_rps2: float = 0.4  # and from its commanded yaw rate (rad/s^2)
-    # how fast a robot reaches a new commanded speed where its marker mount does not say (m/s^2;
-    # 0: at once). A robot told to stop brakes over v^2 / 2a: 6.7 cm from 1 m/s for a pallet truck
-    # (7.5 m/s^2, measured); a filter that stops at once falls that far behind and gates out the
-    # next fixes (docs/benchmarks/gpss.md)
-    accel_mps2: float = 7.5
+    accel_mps2: float = 7.5  # how fast a robot reaches a new commanded speed where its marker
+    # mount does not say (m/s^2; 0: at once). A robot told to stop brakes over v^2 / 2a: 6.7 cm
+    # from 1 m/s for a pallet truck (7.5 m/s^2, measured); a filter that stops at once falls that
+    # far behind and gates out the next fixes (docs/benchmarks/gpss.md)
     gate_sigma: float = 8.0  # fixes farther than this (Mahalanobis) from the prediction are outliers
     reset_after_rejected: int = 3  # so many outliers in a row: the filter is wrong (a robot stopped
     # by a collision), restart it from the next fix
