@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shapely.geometry import Polygon
 
 from simlan_data.algorithms.coordinator import Intent
 from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator, build_route_graph
-from simlan_data.algorithms.fleet.coordinator import reach_of
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.errors import ConfigError
@@ -30,6 +30,17 @@ def grid_from_boxes(
     for x0, y0, x1, y1 in boxes:
         occ[round(y0 / RES) : round(y1 / RES), round(x0 / RES) : round(x1 / RES)] = True
     return OccupancyGrid(occ, (0.0, 0.0), RES)
+
+
+def footprint(fp: tuple[float, float, float, float], pose: tuple[float, float, float]) -> Polygon:
+    """The footprint rectangle (x0, x1, y0, y1 in base_link) at ``pose`` (x, y, yaw)."""
+    x0, x1, y0, y1 = fp
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    pts = [
+        (pose[0] + c * x - s * y, pose[1] + s * x + c * y)
+        for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
+    ]
+    return Polygon(pts)
 
 
 class Fleet:
@@ -67,12 +78,14 @@ class Fleet:
             cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(r["path"], axis=0), axis=1))])
             r["s"] = min(cum[-1], r["s"] + v * dt)
             xy = np.array([np.interp(r["s"], cum, r["path"][:, i]) for i in (0, 1)])
-            r["pose"] = [float(xy[0]), float(xy[1]), r["pose"][2]]
+            step = xy - np.asarray(r["pose"][:2])
+            yaw = float(np.arctan2(step[1], step[0])) if np.hypot(*step) > 1e-6 else r["pose"][2]
+            r["pose"] = [float(xy[0]), float(xy[1]), yaw]  # it faces where it drives
             if r["s"] >= cum[-1] - 1e-9 and np.hypot(*(xy - r["goals"][0])) < 0.3:
                 self.arrivals.append((self.t_s, n, r["goals"][0]))
                 self._dwell[n] = self.t_s + self.dwell_s
                 r["path"] = None
-        self.trace.append({n: tuple(r["pose"][:2]) for n, r in self.robots.items()})
+        self.trace.append({n: tuple(r["pose"]) for n, r in self.robots.items()})
         self.t_s += dt
 
     def _dwelling(self, n: str, r: dict) -> bool:
@@ -95,20 +108,18 @@ class Fleet:
         return not self.robots[n]["goals"]
 
     def min_gap_m(self) -> float:
-        """The smallest distance between two robots' swept circles over the run."""
+        """The smallest distance between two robots' footprints (rectangles at their headings)."""
         names = sorted(self.robots)
-        reach = {n: reach_of(self.robots[n]["fp"]) for n in names}
-        xy = np.array([[snap[n] for n in names] for snap in self.trace])  # (T, R, 2)
         gaps = [
-            np.linalg.norm(xy[:, i] - xy[:, j], axis=1).min() - reach[a] - reach[b]
+            footprint(self.robots[a]["fp"], snap[a]).distance(footprint(self.robots[b]["fp"], snap[b]))
+            for snap in self.trace
             for i, a in enumerate(names)
-            for j, b in enumerate(names)
-            if i < j
+            for b in names[i + 1 :]
         ]
         return float(min(gaps))
 
     def path(self, n: str) -> np.ndarray:
-        return np.array([snap[n] for snap in self.trace])
+        return np.array([snap[n][:2] for snap in self.trace])
 
 
 def test_head_on_in_a_single_lane_aisle_one_yields_at_a_passing_place() -> None:
@@ -140,7 +151,7 @@ def test_four_way_intersection_one_robot_at_a_time_and_all_arrive() -> None:
     fleet.run(300)
     assert all(fleet.done(n) for n in robots)
     assert fleet.min_gap_m() >= SAFETY_M
-    inside = np.array([[np.hypot(x - 12, y - 12) < 1.2 for (x, y) in snap.values()] for snap in fleet.trace])
+    inside = np.array([[np.hypot(p[0] - 12, p[1] - 12) < 1.2 for p in snap.values()] for snap in fleet.trace])
     assert inside.sum(axis=1).max() == 1  # the intersection held by one robot at a time
     assert fleet.coord.state.deadlocks == 0
 

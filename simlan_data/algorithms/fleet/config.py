@@ -28,8 +28,9 @@ class FleetConfig:
     speed_mps: float = 0.5  # planning speed (a step lasts spacing_m / speed_mps)
     horizon_s: float = 90.0  # reservation horizon: how far ahead plans are reserved
     safety_m: float = (
-        0.0  # extra distance between two robots' swept circles (on top of the run's safety distance)
+        0.0  # extra distance between two robots' footprint regions (on top of the run's safety distance)
     )
+    tracking_m: float = 0.15  # footprints grow by this on every side: how far a robot strays from its route
     reach_m: float = 0.35  # a robot within this of a route vertex has reached it
     brake_m: float = 1.0  # below this distance to the last vertex it may enter, the speed limit tapers
     stall_s: float = 3.0  # allowed to move but not moving for this long: stopped (an obstacle, replan)
@@ -42,6 +43,7 @@ class FleetConfig:
         _within("speed_mps", self.speed_mps, 0.0, 5.0, "m/s", 0.5)
         _within("horizon_s", self.horizon_s, 0.0, 1800.0, "s", 90.0)
         _within("safety_m", self.safety_m, 0.0, 5.0, "m", 0.0, zero_ok=True)
+        _within("tracking_m", self.tracking_m, 0.0, 2.0, "m", 0.15, zero_ok=True)
         _within("reach_m", self.reach_m, 0.0, 2.0, "m", 0.35)
         _within("brake_m", self.brake_m, 0.0, 10.0, "m", 1.0)
         _within("stall_s", self.stall_s, 0.0, 600.0, "s", 3.0)

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from simlan_data.algorithms.coordinator import Decision, Intent
 from simlan_data.algorithms.fleet.config import FleetConfig
 from simlan_data.algorithms.fleet.execution import Route, advance, build_routes, frontier, wait_cycles
+from simlan_data.algorithms.fleet.footprint import Shape
 from simlan_data.algorithms.fleet.graph import RouteGraph, build_route_graph
 from simlan_data.algorithms.fleet.schedule import FleetPlan, Obstacle, Request, Timing, plan_fleet
 from simlan_data.algorithms.occupancy import OccupancyGrid
@@ -85,6 +86,7 @@ class FleetCoordinator:
         self._robots: dict[str, _Robot] = {}
         self.waits: dict[str, int] = {}  # ticks spent waiting, per robot (as the gpss coordinator)
         self._force_replan = False
+        self._clearance: NDArray[np.float32] | None = None
 
     # ------------------------------------------------------------------ the role's method
     def decide(self, t_ns: int, intents: list[Intent]) -> dict[str, Decision]:
@@ -156,32 +158,59 @@ class FleetCoordinator:
     def _replan(self, t_ns: int, graph: RouteGraph, movers: list[Intent], others: list[Intent]) -> None:
         """Plan every moving robot from where it is (stopped ones and the others are obstacles)."""
         snap = 1.5 * self.config.spacing_m
-        obstacles = [Obstacle(i.pose_xyyaw[:2], reach_of(i.footprint_m)) for i in others]
-        requests, radii = [], {}
+        obstacles = [self._obstacle(i) for i in others]
+        requests = []
         for i in sorted(movers, key=lambda i: (i.priority, i.namespace)):
             r = self._robots[i.namespace]
             r.goal = i.goal_xy
             if r.stopped_since_ns is not None and r.stopped_since_ns < t_ns:
-                obstacles.append(Obstacle(i.pose_xyyaw[:2], reach_of(i.footprint_m)))
+                obstacles.append(self._obstacle(i))
                 continue  # until it moves again (on its own navigator's plan): then it rejoins
-            start = graph.nearest(i.pose_xyyaw[:2], within_m=snap)
+            xy = i.pose_xyyaw[:2]
+            start = graph.nearest(xy, within_m=snap)
             if start is None:
-                obstacles.append(Obstacle(i.pose_xyyaw[:2], reach_of(i.footprint_m)))
+                obstacles.append(self._obstacle(i))
                 continue
             assert i.goal_xy is not None
-            goal = graph.nearest(i.goal_xy, within_m=snap)
-            radii[i.namespace] = reach_of(i.footprint_m)
-            requests.append(Request(i.namespace, start, goal, radii[i.namespace], i.pose_xyyaw[2]))
+            shape = self._shape(i)
+            requests.append(
+                Request(
+                    i.namespace,
+                    start,
+                    graph.nearest(i.goal_xy, within_m=snap),
+                    shape,
+                    xy,
+                    i.pose_xyyaw[2],
+                    goal_xy=i.goal_xy,
+                    start_turnable=self._clearance_at(xy) >= shape.reach_m,
+                )
+            )
         timing = Timing(self.config.spacing_m, self.config.horizon_steps, self.safety_m)
         plan = plan_fleet(graph, requests, obstacles, timing)
         self.state.plan, self.state.planned_at_ns = plan, t_ns
-        self.state.routes = build_routes(graph, plan, radii, timing.margin(graph))
+        self.state.routes = build_routes(plan, self.safety_m)
         self.state.failures.update(plan.failures)
         self.state.replans += 1
         for i in movers:
             route = self.state.routes.get(i.namespace)
             r = self._robots[i.namespace]
             r.path_xy = None if route is None else self._path(graph, route, i)
+
+    def _shape(self, intent: Intent) -> Shape:
+        return Shape.of(intent.footprint_m, tolerance_m=self.config.tracking_m)
+
+    def _obstacle(self, intent: Intent) -> Obstacle:
+        """Something not in the plan: its footprint where it stands (grown by the tracking error)."""
+        shape = self._shape(intent)
+        return Obstacle(intent.pose_xyyaw[:2], shape.reach_m, intent.pose_xyyaw[2], shape)
+
+    def _clearance_at(self, xy: tuple[float, float]) -> float:
+        cell = self.grid.to_cell(xy)
+        if not self.grid.inside(cell):
+            return 0.0
+        if self._clearance is None:
+            self._clearance = self.grid.clearance_m()
+        return float(self._clearance[cell])
 
     def _path(self, graph: RouteGraph, route: Route, intent: Intent) -> NDArray[np.float64]:
         """The path the navigator follows: from the robot through the route's vertices to its goal."""

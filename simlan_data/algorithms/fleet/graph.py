@@ -63,6 +63,16 @@ class RouteGraph:
         return csr_matrix((data, (np.concatenate([u, v]), np.concatenate([v, u]))), shape=(self.size,) * 2)
 
     @cached_property
+    def arcs(self) -> NDArray[np.int64]:
+        """(2E, 2) directed edges: every edge both ways."""
+        return np.concatenate([self.edges, self.edges[:, ::-1]])
+
+    @cached_property
+    def arc_index(self) -> dict[tuple[int, int], int]:
+        """(u, v) -> row of ``arcs``."""
+        return {(u, v): k for k, (u, v) in enumerate(self.arcs.tolist())}
+
+    @cached_property
     def components(self) -> NDArray[np.int32]:
         """Connected-component label of every node."""
         return connected_components(self.matrix, directed=False)[1]

@@ -2,33 +2,45 @@
 
 Time is cut into steps of ``step_s`` (one block of the graph at the fleet's speed); an edge takes
 ``ceil(length / spacing)`` steps. Robots are planned one after the other in priority order; each
-one's plan is a space-time A* (states: node, step, heading) against the reservation table of the
-robots planned before it, and is then written into the table. A robot occupies, during a step,
-the segment it drives (or the node it waits on) grown by its swept circle (its footprint's
-circumradius), so two reserved robots are never closer than their two circles plus the safety
-distance: one robot at a time in an intersection and no head-on entries into a single lane follow
-from that geometry, whatever the layout.
+one's plan is a space-time A* against the reservation table of the robots planned before it, and
+is then written into the table.
 
-A robot turns more than ``turn_tolerance_rad`` only at a node whose clearance covers its swept
-circle. A robot whose planning fails moves to the front of the order and everyone is planned again
-(priority inheritance, at most once per robot). A target already held by a robot planned earlier
-(a dock) queues the robot at the nearest free node outside it. A robot still failing stays where
-it is as an obstacle and is reported (``unreachable`` when its goal lies outside the graph's
-component, ``blocked`` otherwise).
+What a robot occupies is its footprint's region (``footprint.py``): driving a straight edge, the
+capsule from its tail at the edge's start to its nose at the edge's end; turning in place, the
+circle of its reach. Along a route, a robot *holds* each vertex's region from the moment it leaves
+the vertex before until it arrives at the vertex after (so at any time it holds the edge it drives
+and the one it came by). The search checks exactly what the robot will hold, instant by instant,
+against what the others hold; the executor (``execution.py``) then orders the robots on the same
+regions, so plan and execution agree and the order has no cycle. Two robots side by side keep
+their half widths plus the safety distance apart; one robot at a time in an intersection and no
+head-on entry into a single lane follow from the geometry, whatever the layout.
+
+A robot turns by more than ``turn_tolerance_rad`` only at a vertex where it is planned to turn in
+place, and only where the clearance covers its reach (its tail does not sweep into a shelf). A robot
+whose planning fails moves to the front of the order and everyone is planned again (priority
+inheritance, at most once per robot). A goal held by a robot planned earlier (a dock) queues the
+robot at the nearest free node outside it. A robot still failing stands where it is as an obstacle
+and is reported (``unreachable`` when its goal lies outside the graph's component, ``blocked``
+otherwise).
 """
 
 from __future__ import annotations
 
 import heapq
 import itertools
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.algorithms.fleet import footprint as fp
+from simlan_data.algorithms.fleet.footprint import Region, Shape
 from simlan_data.algorithms.fleet.graph import RouteGraph
 
-NO_HEADING = 8
+START = -1  # ``prev`` of the start state: the robot stands at its real pose
+FROM_START = -2  # ``prev`` of the first vertex after it: the edge starts at the real pose
+MAX_EXPANSIONS = 200_000  # a search that expands more states than this gives up (reported blocked)
 
 
 @dataclass(frozen=True)
@@ -36,10 +48,17 @@ class Request:
     """What one robot asks of the fleet plan."""
 
     name: str
-    start: int  # node
+    start: int  # node it is snapped to
     goal: int | None  # node; None: the goal is off the graph
-    radius_m: float  # swept circle (footprint circumradius)
+    shape: Shape
+    start_xy: tuple[float, float]
     heading_rad: float | None = None  # None: may leave the start in any direction
+    goal_xy: tuple[float, float] | None = None  # the real goal, driven to from the goal node
+    start_turnable: bool = True  # it may turn in place where it stands
+
+    @property
+    def radius_m(self) -> float:
+        return self.shape.reach_m
 
 
 @dataclass(frozen=True)
@@ -48,17 +67,44 @@ class Obstacle:
 
     xy: tuple[float, float]
     radius_m: float
+    yaw_rad: float | None = None  # with ``shape``: its footprint at this heading, else a circle
+    shape: Shape | None = None
+
+    def region(self) -> Region:
+        if self.shape is not None and self.yaw_rad is not None:
+            return fp.pose(self.shape, np.asarray(self.xy), self.yaw_rad)
+        c = np.asarray([self.xy], dtype=float)
+        return c, c.copy(), np.array([self.radius_m])
+
+
+@dataclass
+class Vertex:
+    """A place on a robot's route: the node, when it arrives and leaves, what it holds meanwhile."""
+
+    node: int
+    arrive: int  # step it arrives (0: the start)
+    depart: int | None  # step it starts for the next vertex (None: it stays)
+    occ: Region  # what it holds from leaving the vertex before until arriving at the one after
+    loose: bool = False  # where it stands now, or its way off it: kept off others, not the safety distance
 
 
 @dataclass
 class RobotPlan:
-    """One robot's timed route: node per step from step 0 (its start) to the end of its plan."""
+    """One robot's timed route."""
 
     name: str
-    nodes: list[int]
+    vertices: list[Vertex]
     target: int  # where it ends: its goal, or a queue node outside a held goal
     queued: bool = False  # waits outside its goal (held by a robot planned before it)
     complete: bool = True  # reaches the target within the horizon
+
+    @property
+    def nodes(self) -> list[int]:
+        """Node of the last vertex reached, per step, up to the arrival at the last one."""
+        out: list[int] = []
+        for a, b in zip(self.vertices, self.vertices[1:] + [None]):
+            out.extend([a.node] * ((b.arrive if b is not None else a.arrive + 1) - a.arrive))
+        return out
 
 
 @dataclass
@@ -68,64 +114,76 @@ class FleetPlan:
     order: list[str] = field(default_factory=list)  # the priority order that was used
 
 
-class Reservations:
-    """Per step, the circles robots planned so far occupy: sample points and radii."""
-
-    def __init__(self, horizon: int) -> None:
-        self.horizon = horizon
-        self.points: list[list[NDArray[np.float64]]] = [[] for _ in range(horizon + 1)]
-        self.radii: list[list[NDArray[np.float64]]] = [[] for _ in range(horizon + 1)]
-
-    def add_static(self, xy: tuple[float, float], radius_m: float) -> None:
-        for k in range(self.horizon + 1):
-            self.points[k].append(np.asarray([xy], dtype=float))
-            self.radii[k].append(np.asarray([radius_m]))
-
-    def add_plan(self, graph: RouteGraph, nodes: list[int], radius_m: float) -> None:
-        """Reserve the swept segment of every step; after its plan the robot stays at its end."""
-        xy = graph.xy[np.asarray(nodes + [nodes[-1]] * (self.horizon + 2 - len(nodes)))]
-        for k in range(self.horizon + 1):
-            a, b = xy[k], xy[k + 1]
-            grow = 0.25 * float(np.linalg.norm(b - a))  # any point of a->b within len/4 of a sample
-            self.points[k].append(np.stack([a, 0.5 * (a + b), b]))
-            self.radii[k].append(np.full(3, radius_m + grow))
-
-    def blocked(self, graph: RouteGraph, radius_m: float, margin_m: float) -> NDArray[np.bool_]:
-        """(horizon + 1, N): the nodes a robot of ``radius_m`` may not occupy at each step."""
-        out = np.zeros((self.horizon + 1, graph.size), dtype=bool)
-        for k in range(self.horizon + 1):
-            if not self.points[k]:
-                continue
-            pts, rad = np.concatenate(self.points[k]), np.concatenate(self.radii[k])
-            for hits in graph.tree.query_ball_point(pts, rad + radius_m + margin_m):
-                out[k, hits] = True
-        return out
-
-
 @dataclass(frozen=True)
 class Timing:
     """How the plan's clock relates to the graph."""
 
     spacing_m: float
     horizon: int  # steps
-    safety_m: float  # extra distance kept between two robots' circles
-    turn_tolerance_rad: float = np.pi / 3
-    moves: list[list[tuple[int, int, int]]] | None = field(default=None, compare=False)
+    safety_m: float  # distance kept between two robots' regions
+    turn_tolerance_rad: float = math.radians(50.0)  # larger heading changes need a turn in place
 
     def steps(self, length_m: float) -> int:
         return max(1, int(np.ceil(length_m / self.spacing_m - 1e-6)))
 
-    def margin(self, graph: RouteGraph) -> float:
-        """Safety distance plus half the longest edge (a robot anywhere on its own edge)."""
-        return self.safety_m + 0.5 * float(graph.lengths_m.max(initial=0.0))
+
+class Reservations:
+    """Per step, the regions the robots planned so far hold."""
+
+    def __init__(self, graph: RouteGraph, horizon: int, safety_m: float) -> None:
+        self.graph, self.horizon, self.safety_m = graph, horizon, safety_m
+        self.parts: list[list[Region]] = [[] for _ in range(horizon + 1)]
+        self._merged: dict[int, Region] = {}
+        self.waiting: dict[str, Region] = {}  # robots not planned yet, where they stand
+
+    def set_waiting(self, waiting: dict[str, Region]) -> None:
+        self.waiting = waiting
+        self._merged.clear()
+
+    def add(self, step: int, region: Region) -> None:
+        self.parts[step].append(region)
+        self._merged.pop(step, None)
+
+    def add_static(self, region: Region) -> None:
+        for k in range(self.horizon + 1):
+            self.add(k, region)
+
+    def add_plan(self, plan: RobotPlan) -> None:
+        """Reserve what the robot holds at every step; after its plan it stays on its last vertex."""
+        vs = plan.vertices
+        for m, v in enumerate(vs):
+            acquire = 0 if m == 0 else (vs[m - 1].depart or 0) + 1
+            release = vs[m + 1].arrive if m + 1 < len(vs) else self.horizon
+            for k in range(acquire, min(release, self.horizon) + 1):
+                self.add(k, v.occ)
+
+    def at(self, step: int) -> Region | None:
+        parts = self.parts[step] + list(self.waiting.values())
+        if not parts:
+            return None
+        if step not in self._merged:
+            self._merged[step] = fp.region(*parts)
+        return self._merged[step]
+
+    def near(self, step: int, extent_m: float) -> NDArray[np.bool_] | None:
+        """Nodes within ``extent_m`` plus the safety distance of anything held at ``step``."""
+        held = self.at(step)
+        if held is None:
+            return None
+        p, q, r = held
+        out = np.zeros(self.graph.size, dtype=bool)
+        for a, b, rad in zip(p, q, r):
+            n = max(2, int(np.ceil(np.linalg.norm(b - a) / 0.5)) + 1)
+            pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+            for hits in self.graph.tree.query_ball_point(pts, rad + self.safety_m + extent_m + 0.25):
+                out[hits] = True
+        return out
 
 
 def plan_fleet(
     graph: RouteGraph, requests: list[Request], obstacles: list[Obstacle], timing: Timing
 ) -> FleetPlan:
     """Plan every request in order (earlier = higher priority), with inheritance on failure."""
-    if timing.moves is None:
-        timing = replace(timing, moves=_moves(graph, timing))
     order = [r.name for r in requests]
     by_name = {r.name: r for r in requests}
     promoted: set[str] = set()
@@ -144,6 +202,11 @@ def plan_fleet(
         order = [first] + [n for n in order if n != first]
 
 
+def _standing(r: Request) -> RobotPlan:
+    occ = _start_region(r, turn=False)
+    return RobotPlan(r.name, [Vertex(r.start, 0, None, occ, loose=True)], r.start, complete=False)
+
+
 def _plan_in_order(
     graph: RouteGraph,
     requests: list[Request],
@@ -151,127 +214,283 @@ def _plan_in_order(
     timing: Timing,
     standing: set[str],
 ) -> FleetPlan:
-    table = Reservations(timing.horizon)
+    table = Reservations(graph, timing.horizon, timing.safety_m)
     for o in obstacles:
-        table.add_static(o.xy, o.radius_m)
+        table.add_static(o.region())
     out = FleetPlan()
     pending = []
     for r in requests:  # robots that cannot be planned stand where they are, for everyone
         if r.goal is None or graph.components[r.goal] != graph.components[r.start]:
             out.failures[r.name] = "unreachable"
-            table.add_plan(graph, [r.start], r.radius_m)
+            table.add_plan(_standing(r))
         elif r.name in standing:
             out.failures[r.name] = "blocked"
-            out.plans[r.name] = RobotPlan(r.name, [r.start], r.start, complete=False)
-            table.add_plan(graph, [r.start], r.radius_m)
+            out.plans[r.name] = _standing(r)
+            table.add_plan(out.plans[r.name])
         else:
             pending.append(r)
+    # a robot keeps off where the robots after it stand (they may not get away in time: a robot
+    # planned earlier does not drive through one that cannot turn or has nowhere to go)
+    waiting = {r.name: _start_region(r, turn=False) for r in pending}
     for r in pending:
+        del waiting[r.name]
+        table.set_waiting(dict(waiting))
         plan = _plan_one(graph, r, table, timing)
         if plan is None:
             out.failures[r.name] = "blocked"
-            plan = RobotPlan(r.name, [r.start], r.start, complete=False)
+            plan = _standing(r)
         out.plans[r.name] = plan
-        table.add_plan(graph, plan.nodes, r.radius_m)
+        table.add_plan(plan)
     return out
 
 
 def _plan_one(graph: RouteGraph, r: Request, table: Reservations, timing: Timing) -> RobotPlan | None:
     """Space-time A* to the goal, or to a queue node outside it when the goal is held."""
     assert r.goal is not None
-    blocked = table.blocked(graph, r.radius_m, timing.margin(graph))
-    blocked[0, r.start] = False  # where it stands now is its own
-    last = np.where(blocked.any(axis=0), blocked.shape[0] - 1 - np.argmax(blocked[::-1], axis=0), -1)
+    search = _Search(graph, r, table, timing)
     dist = graph.distances_to(r.goal)
-    if last[r.goal] < timing.horizon:  # the goal frees within the horizon: go there
-        nodes = _search(graph, r, r.goal, blocked, last, dist, timing)
-        if nodes is not None:
-            return RobotPlan(r.name, nodes, r.goal, complete=nodes[-1] == r.goal)
+    if not search.held_at(r.goal, timing.horizon):  # free at the horizon: go there
+        plan = search.run(r.goal, dist, tail=r.goal_xy)
+        if plan is not None:
+            return plan
     # held to the end of the horizon (a dock in use): the nearest node that stays free from the
-    # second half of the horizon on, well outside the goal's conflict zone
-    free_late = last < timing.horizon // 2
-    # twice the conflict distance: the one served can leave past the queue
-    apart = np.linalg.norm(graph.xy - graph.xy[r.goal], axis=1) > 2 * (2 * r.radius_m + timing.margin(graph))
-    candidates = np.flatnonzero(free_late & apart & np.isfinite(dist))
-    for node in candidates[np.argsort(dist[candidates], kind="stable")][:12]:
-        wait_dist = graph.distances_to(int(node))
-        nodes = _search(graph, r, int(node), blocked, last, wait_dist, timing)
-        if nodes is not None and nodes[-1] == node:
-            return RobotPlan(r.name, nodes, int(node), queued=True)
+    # second half of the horizon on, twice the conflict distance from the goal (the robot served
+    # leaves past the queue)
+    apart = np.linalg.norm(graph.xy - graph.xy[r.goal], axis=1) > 2 * (2 * r.shape.reach_m + timing.safety_m)
+    candidates = np.flatnonzero(apart & np.isfinite(dist))
+    tried = 0
+    for node in candidates[np.argsort(dist[candidates], kind="stable")]:
+        if tried >= 12:
+            break
+        if any(search.held_at(int(node), k) for k in range(timing.horizon // 2, timing.horizon + 1)):
+            continue
+        tried += 1
+        plan = search.run(int(node), graph.distances_to(int(node)), tail=None)
+        if plan is not None and plan.vertices[-1].node == node:
+            plan.queued = True
+            return plan
     return None
 
 
-def _moves(graph: RouteGraph, timing: Timing) -> list[list[tuple[int, int, int]]]:
-    """Per node: (neighbour, steps to drive there, heading index 0..7) of every edge."""
-    d = graph.xy[graph.edges[:, 1]] - graph.xy[graph.edges[:, 0]]
-    heading = np.round(np.arctan2(d[:, 1], d[:, 0]) / (np.pi / 4)).astype(int) % 8
-    steps = [timing.steps(length) for length in graph.lengths_m.tolist()]
-    out: list[list[tuple[int, int, int]]] = [[] for _ in range(graph.size)]
-    for (u, v), n, h in zip(graph.edges.tolist(), steps, heading.tolist()):
-        out[u].append((v, n, h))
-        out[v].append((u, n, (h + 4) % 8))
-    return [sorted(m) for m in out]
+def _start_region(r: Request, *, turn: bool) -> Region:
+    xy = np.asarray(r.start_xy, dtype=float)
+    if r.heading_rad is None:
+        return fp.circle(r.shape, xy)
+    here = fp.pose(r.shape, xy, r.heading_rad)
+    return fp.region(here, fp.circle(r.shape, xy)) if turn else here
 
 
-def _search(
-    graph: RouteGraph,
-    r: Request,
-    target: int,
-    blocked: NDArray[np.bool_],
-    last: NDArray[np.int64],
-    dist: NDArray[np.float64],
-    timing: Timing,
-) -> list[int] | None:
-    """Earliest arrival at ``target`` that it can then hold; else the plan that ends nearest to it
-    at the horizon (a windowed plan); None if it cannot even keep clear until the horizon."""
-    horizon = timing.horizon
-    if not np.isfinite(dist[r.start]):
-        return None
-    h = (dist / timing.spacing_m).tolist()
-    turnable = graph.turnable(r.radius_m).tolist()
-    busy = blocked.tolist()  # list indexing is several times faster than numpy's in this loop
-    moves = _moves(graph, timing) if timing.moves is None else timing.moves
-    max_turn = int(np.floor(timing.turn_tolerance_rad / (np.pi / 4) + 1e-9))
-    start_heading = NO_HEADING if r.heading_rad is None else int(np.round(r.heading_rad / (np.pi / 4))) % 8
-    last_target = int(last[target])
-    start = (r.start, 0, start_heading)
-    parent: dict[tuple[int, int, int], tuple[int, int, int] | None] = {start: None}
-    heap = [(h[r.start], 0, r.start, start_heading)]
-    best_end: tuple[float, tuple[int, int, int]] | None = None
-    while heap:
-        _, k, u, heading = heapq.heappop(heap)
-        state = (u, k, heading)
-        if u == target and k > last_target:
-            return _unwind(parent, state)
-        if k >= horizon:
-            if best_end is None or h[u] < best_end[0]:
-                best_end = (h[u], state)
-            continue
-        for v, steps, d in [(u, 1, heading), *moves[u]]:
-            if v != u and heading != NO_HEADING and not turnable[u]:
-                turn = min((d - heading) % 8, (heading - d) % 8)
-                if turn > max_turn:
-                    continue  # its footprint would sweep into an obstacle turning here
-            k2 = min(k + steps, horizon)
-            if any(busy[j][u] or busy[j][v] for j in range(k + 1, k2 + 1)):
+State = tuple[int, int, int, bool]  # node, step, previous node (START, FROM_START), turns here
+
+
+class _Search:
+    """Space-time A* of one robot against the reservation table (states: node, step, the node it
+    came from, whether it turns in place here)."""
+
+    def __init__(self, graph: RouteGraph, r: Request, table: Reservations, timing: Timing) -> None:
+        self.graph, self.r, self.table, self.timing = graph, r, table, timing
+        self.start_xy = np.asarray(r.start_xy, dtype=float)
+        offset = float(np.linalg.norm(self.start_xy - graph.xy[r.start]))
+        snap = 1.5 * timing.spacing_m  # the real goal lies this far from its node at most
+        self.extent = (
+            float(graph.lengths_m.max(initial=0.0)) + offset + snap + r.shape.reach_m + r.shape.half_width_m
+        )
+        self.turnable = graph.turnable(r.shape.reach_m).tolist()
+        self._bad: dict[int, NDArray[np.bool_] | None] = {}
+        self._free: dict[tuple, bool] = {}
+        self._regions: dict[tuple, Region] = {}
+        # shared pieces: every directed edge driven, then a turn in place at every node
+        arcs, shape = graph.arcs, r.shape
+        a, b = graph.xy[arcs[:, 0]], graph.xy[arcs[:, 1]]
+        d = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1), 1e-9)[:, None]
+        self.n_arcs = len(arcs)
+        self.unit_p = np.concatenate([a + shape.back_m * d, graph.xy])
+        self.unit_q = np.concatenate([b + shape.front_m * d, graph.xy])
+        self.unit_r = np.concatenate(
+            [np.full(len(arcs), shape.half_width_m), np.full(graph.size, shape.reach_m)]
+        )
+        self.unit_anchor = np.concatenate([arcs[:, 1], np.arange(graph.size)])
+        self.tail: tuple[float, float] | None = None
+        self.target = -1
+
+    # ------------------------------------------------------------------ geometry
+    def pos(self, node: int, prev: int) -> NDArray[np.float64]:
+        return self.start_xy if prev == START else self.graph.xy[node]
+
+    def heading(self, node: int, prev: int) -> float | None:
+        if prev == START:
+            return self.r.heading_rad
+        a = self.start_xy if prev == FROM_START else self.graph.xy[prev]
+        d = self.graph.xy[node] - a
+        return float(np.arctan2(d[1], d[0])) if np.hypot(*d) > 1e-9 else None
+
+    def occ(self, node: int, prev: int, turn: bool) -> Region:
+        """What the robot holds for a vertex (see the module docstring)."""
+        units, specials = self._units(node, prev, turn)
+        parts = [self._special(k) for k in specials]
+        for u in units:
+            parts.append((self.unit_p[u : u + 1], self.unit_q[u : u + 1], self.unit_r[u : u + 1]))
+        return fp.region(*parts)
+
+    def _units(self, node: int, prev: int, turn: bool) -> tuple[list[int], list[tuple]]:
+        """A vertex's region as shared pieces (arcs, circles) and pieces of this search only."""
+        units: list[int] = []
+        specials: list[tuple] = []
+        if prev == START:
+            return units, [("start", turn)]
+        if prev == FROM_START:
+            specials.append(("from_start", node))
+        else:
+            units.append(self.graph.arc_index[(prev, node)])
+        if turn:
+            units.append(self.n_arcs + node)
+        if node == self.target and self.tail is not None:
+            specials.append(("tail", node, self.tail))
+        return units, specials
+
+    def _special(self, key: tuple) -> Region:
+        if key not in self._regions:
+            if key[0] == "start":
+                self._regions[key] = _start_region(self.r, turn=key[1])
+            elif key[0] == "from_start":
+                self._regions[key] = fp.drive(self.r.shape, self.start_xy, self.graph.xy[key[1]])
+            else:
+                self._regions[key] = fp.drive(self.r.shape, self.graph.xy[key[1]], np.asarray(key[2]))
+        return self._regions[key]
+
+    def _bad_units(self, step: int) -> NDArray[np.bool_] | None:
+        """Per shared piece: whether it conflicts with what is held at ``step`` (None: nothing is)."""
+        if step not in self._bad:
+            near = self.table.near(step, self.extent)
+            if near is None:
+                self._bad[step] = None
+            else:
+                held = self.table.at(step)
+                assert held is not None
+                cand = np.flatnonzero(near[self.unit_anchor])
+                bad = np.zeros(len(self.unit_r), dtype=bool)
+                if len(cand):
+                    d = fp.segment_distances(self.unit_p[cand], self.unit_q[cand], held[0], held[1])
+                    lim = self.unit_r[cand][:, None] + held[2][None, :] + self.timing.safety_m
+                    bad[cand] = (d < lim).any(axis=1)
+                self._bad[step] = bad
+        return self._bad[step]
+
+    def free(self, step: int, parts: tuple[tuple[int, int, bool], ...]) -> bool:
+        """Whether the vertices ``parts`` (node, prev, turn) are free of reservations at ``step``."""
+        bad = self._bad_units(step)
+        if bad is None:
+            return True
+        for p in parts:
+            units, specials = self._units(*p)
+            if any(bad[u] for u in units):
+                return False
+            for k in specials:
+                ck = (step, k)
+                if ck not in self._free:
+                    held = self.table.at(step)
+                    assert held is not None
+                    # where it stands now may already be within the safety distance of others
+                    # (it came there under the safety layer): it may leave as long as it touches none
+                    margin = 0.0 if k[0] in ("start", "from_start") else self.timing.safety_m
+                    self._free[ck] = not fp.conflict(self._special(k), held, margin)
+                if not self._free[ck]:
+                    return False
+        return True
+
+    def held_at(self, node: int, step: int) -> bool:
+        """Whether even a robot standing on ``node`` (its width around it) conflicts at ``step``."""
+        held = self.table.at(step)
+        if held is None:
+            return False
+        c = self.graph.xy[node][None, :]
+        return fp.conflict((c, c.copy(), np.array([self.r.shape.half_width_m])), held, self.timing.safety_m)
+
+    # ------------------------------------------------------------------ search
+    def run(
+        self, target: int, dist: NDArray[np.float64], *, tail: tuple[float, float] | None
+    ) -> RobotPlan | None:
+        """Earliest arrival at ``target`` that it can then hold; else the plan that ends nearest to it
+        at the horizon (a windowed plan); None if it cannot even keep clear until the horizon."""
+        r, horizon = self.r, self.timing.horizon
+        if not np.isfinite(dist[r.start]):
+            return None
+        if (self.target, self.tail) != (target, tail):
+            self.target, self.tail = target, tail
+            self._free = {k: v for k, v in self._free.items() if k[1][0] != "tail"}
+        h = (dist / self.timing.spacing_m).tolist()
+        parent: dict[State, State | None] = {}
+        heap: list[tuple[float, int, State]] = []
+        tie = 0
+        for turn in (False, True):
+            if turn and not r.start_turnable:
                 continue
-            nxt = (v, k2, d)
-            if nxt in parent:
+            s = (r.start, 0, START, turn)
+            parent[s] = None
+            heapq.heappush(heap, (h[r.start], tie := tie + 1, s))
+        best_end: tuple[float, State] | None = None
+        expanded = 0
+        while heap and expanded < MAX_EXPANSIONS:
+            _, _, state = heapq.heappop(heap)
+            expanded += 1
+            u, k, prev, turn = state
+            if u == target and (prev != START or dist[r.start] == 0) and self._holds(state):
+                return self._plan(parent, state, complete=True)
+            if k >= horizon:
+                if best_end is None or h[u] < best_end[0]:
+                    best_end = (h[u], state)
                 continue
-            parent[nxt] = state
-            heapq.heappush(heap, (k2 + h[v], k2, v, d))
-    return _unwind(parent, best_end[1]) if best_end is not None else None
+            for nxt in self._moves(state):
+                if nxt in parent:
+                    continue
+                here = (u, prev, turn)
+                parts = (here,) if nxt[0] == u and nxt[2] == prev else (here, (nxt[0], nxt[2], nxt[3]))
+                if not all(self.free(j, parts) for j in range(k + 1, nxt[1] + 1)):
+                    continue
+                parent[nxt] = state
+                heapq.heappush(heap, (nxt[1] + h[nxt[0]], tie := tie + 1, nxt))
+        return self._plan(parent, best_end[1], complete=False) if best_end is not None else None
 
+    def _holds(self, state: State) -> bool:
+        u, k, prev, turn = state
+        return all(self.free(j, ((u, prev, turn),)) for j in range(k + 1, self.timing.horizon + 1))
 
-def _unwind(parent: dict, state: tuple[int, int, int]) -> list[int]:
-    """Node per step from the start to ``state`` (edges of several steps repeat their start)."""
-    chain = []
-    s: tuple[int, int, int] | None = state
-    while s is not None:
-        chain.append(s)
-        s = parent[s]
-    chain.reverse()
-    nodes = [chain[0][0]]
-    for (_, k0, _), (v, k1, _) in itertools.pairwise(chain):
-        nodes.extend([nodes[-1]] * (k1 - k0 - 1) + [v])
-    return nodes
+    def _moves(self, state: State) -> list[State]:
+        """Wait, or drive to a neighbour (or, from the real start pose, to the start node)."""
+        u, k, prev, turn = state
+        horizon = self.timing.horizon
+        out: list[State] = [(u, min(k + 1, horizon), prev, turn)]
+        here, heading = self.pos(u, prev), self.heading(u, prev)
+        targets = list(self.graph.neighbours[u])
+        if prev == START and float(np.linalg.norm(here - self.graph.xy[u])) > 0.05:
+            targets.append(u)
+        for v in targets:
+            d = self.graph.xy[v] - here
+            length = float(np.hypot(*d))
+            if heading is not None and not turn and length > 1e-9:
+                off = abs((np.arctan2(d[1], d[0]) - heading + np.pi) % (2 * np.pi) - np.pi)
+                if off > self.timing.turn_tolerance_rad:
+                    continue  # would have to turn in place here, which this state does not
+            k2 = min(k + self.timing.steps(length), horizon)
+            came = FROM_START if prev == START else u
+            out.append((v, k2, came, False))
+            if self.turnable[v]:
+                out.append((v, k2, came, True))
+        return out
+
+    def _plan(self, parent: dict[State, State | None], state: State, *, complete: bool) -> RobotPlan:
+        chain: list[State] = []
+        s: State | None = state
+        while s is not None:
+            chain.append(s)
+            s = parent[s]
+        chain.reverse()
+        vertices = [Vertex(chain[0][0], 0, None, self.occ(chain[0][0], START, chain[0][3]), loose=True)]
+        for a, b in itertools.pairwise(chain):
+            if (b[0], b[2]) == (a[0], a[2]):
+                continue  # a wait
+            vertices[-1].depart = a[1]
+            vertices.append(Vertex(b[0], b[1], None, self.occ(b[0], b[2], b[3]), loose=b[2] == FROM_START))
+        return RobotPlan(
+            self.r.name, vertices, self.target, complete=complete and vertices[-1].node == self.target
+        )
