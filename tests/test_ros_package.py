@@ -262,10 +262,7 @@ def test_a_msg_that_differs_from_the_bag_is_reported(all_types_bag: Path) -> Non
 
 @pytest.mark.parametrize(
     "name",
-    [
-        name
-        for name in sorted(_shipped_texts())
-    ],
+    sorted(_shipped_texts()),
 )
 def test_no_field_is_a_cpp_or_python_keyword(name: str) -> None:
     """ROS 2's C++ generator uses field names as member names; its Python one as attributes."""

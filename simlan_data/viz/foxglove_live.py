@@ -147,7 +147,7 @@ class LiveView:
         if last is not None and target is not None:
             target.log(last[1], log_time=last[0])
 
-    def on_unsubscribe(self, client: Any, channel: Any) -> None:  # noqa: ARG002 - SDK signature
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
         """Nothing to do (the SDK calls every listener method; a missing one logs an error)."""
 
     # -------------------------------------------------------------------------- pacing
