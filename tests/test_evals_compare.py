@@ -144,6 +144,7 @@ def tiny_suite(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.slow  # (20 s of suite runs: the default suite stays under 10 minutes; CI runs slow too)
 def test_candidate_against_baseline_end_to_end(tmp_path: Path) -> None:
     suite, out = tiny_suite(tmp_path), tmp_path / "out"
     args = ("mini", "--file", str(suite), "--jobs", "2", "--out", str(out))

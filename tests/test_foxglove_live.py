@@ -63,6 +63,7 @@ class Client:
         self.topics = topics
         self.channels: dict[str, dict[str, Any]] = {}  # topic -> advertised channel
         self.by_subscription: dict[int, str] = {}
+        self.subscribed_at: dict[str, float] = {}  # topic -> when it was (last) subscribed
         self.received: dict[str, list[tuple[int, bytes]]] = {t: [] for t in topics}
         self.server_info: dict[str, Any] = {}
 
@@ -70,24 +71,38 @@ class Client:
         deadline = time.monotonic() + within_s
         while not done(self) and time.monotonic() < deadline:
             try:
-                frame = self.ws.recv(timeout=max(0.05, deadline - time.monotonic()))
-            except (TimeoutError, ConnectionClosed):  # (the run ended: its server closed)
+                frame = self.ws.recv(timeout=max(0.05, min(1.0, deadline - time.monotonic())))
+            except TimeoutError:
+                self._subscribe_again()
+                continue
+            except ConnectionClosed:  # (the run ended: its server closed)
                 break
             if isinstance(frame, str):
                 self._control(json.loads(frame))
             elif frame[0] == MESSAGE_DATA:
                 sub, log_time = struct.unpack_from("<IQ", frame, 1)
                 self.received[self.by_subscription[sub]].append((log_time, bytes(frame[13:])))
+            self._subscribe_again()
+
+    def _subscribe_again(self) -> None:
+        """A subscription that got nothing for 3 s is made again, as Foxglove does when a panel
+        re-subscribes: foxglove-sdk 0.30 now and then refuses a subscription that races the
+        channel's advertisement ("attempted to subscribe to unknown channel", seen under load
+        only); the server's listener then sends a latched topic's last message again."""
+        now = time.monotonic()
+        for topic, since in list(self.subscribed_at.items()):
+            if not self.received[topic] and now - since > 3.0:
+                sub = len(self.by_subscription) + 1
+                self.by_subscription[sub] = topic
+                self.subscribed_at[topic] = now
+                channel_id = self.channels[topic]["id"]
+                self.ws.send(
+                    json.dumps({"op": "subscribe", "subscriptions": [{"id": sub, "channelId": channel_id}]})
+                )
 
     def _control(self, msg: dict[str, Any]) -> None:
         if msg["op"] == "serverInfo":
             self.server_info = msg
-        elif msg["op"] == "status" and "unknown channel" in msg.get("message", ""):
-            # a subscription that raced the channel's advertisement (seen under load): again
-            channel_id = int(msg["message"].rsplit(":", 1)[1])
-            for sub, topic in self.by_subscription.items():
-                if self.channels[topic]["id"] == channel_id:
-                    self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": sub, "channelId": channel_id}]}))
         elif msg["op"] == "advertise":
             subscribe = []
             for channel in msg["channels"]:
@@ -95,6 +110,7 @@ class Client:
                     self.channels[channel["topic"]] = channel
                     sub = len(self.by_subscription) + 1
                     self.by_subscription[sub] = channel["topic"]
+                    self.subscribed_at[channel["topic"]] = time.monotonic()
                     subscribe.append({"id": sub, "channelId": channel["id"]})
             if subscribe:
                 self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subscribe}))

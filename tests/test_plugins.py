@@ -278,6 +278,7 @@ def test_an_exception_in_the_plugin_leaves_a_finalized_recording(
     assert not (run_dir / "RUNNING").exists(), "a finished recording needs no recovery marker"
 
 
+@pytest.mark.slow  # (20 s of suite runs: the default suite stays under 10 minutes; CI runs slow too)
 def test_the_example_plugin_is_scored_against_the_built_in_in_a_suite(tmp_path: Path) -> None:
     """(5) the installed plug-in through a V&V suite: `evals --candidate algorithms/localizer=centroid`
     simulates both sides over the same seeds (the candidate's robots steer on centroid's
