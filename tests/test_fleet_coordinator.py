@@ -155,6 +155,7 @@ def test_two_pallet_trucks_pass_side_by_side_in_a_wide_aisle() -> None:
     assert fleet.coord.state.deadlocks == 0
 
 
+@pytest.mark.slow  # (the default suite stays under 10 minutes; CI runs the slow suite too)
 def test_four_way_intersection_one_robot_at_a_time_and_all_arrive() -> None:
     # two corridors 2.4 m wide crossing at (12, 12), open squares at the four ends
     blocks = [(3, 3, 10.8, 10.8), (13.2, 3, 21, 10.8), (3, 13.2, 10.8, 21), (13.2, 13.2, 21, 21)]
@@ -188,6 +189,7 @@ def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
     assert fleet.min_gap_m() >= SAFETY_M
 
 
+@pytest.mark.slow  # (the default suite stays under 10 minutes; CI runs the slow suite too)
 def test_dock_queue_served_in_order_waiting_outside() -> None:
     grid = grid_from_boxes((20, 14), [(0, 11, 8.5, 14), (11.5, 11, 20, 14)])  # the dock: a bay at the top
     dock = (10.0, 12.5)

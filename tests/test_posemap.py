@@ -256,6 +256,7 @@ def test_tiny_training_beats_the_mean_pose(trained: tuple[Path, Path]) -> None:
     assert (run / "posemap_report.md").read_text().count("| j") >= 44
 
 
+@pytest.mark.slow  # (the default suite stays under 10 minutes; CI runs the slow suite too)
 def test_drive_replays_landmarks_through_the_model(trained: tuple[Path, Path], tmp_path: Path) -> None:
     ds, run = trained
     proc = run_cli(
