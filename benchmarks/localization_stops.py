@@ -27,7 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import REPO, machine
 from simlan_data.constants import NS_PER_S
-from simlan_data.evaluation.metrics import estimates_from_recording, ground_truth
+from simlan_data.evaluation.metrics import emergency_stops, estimates_from_recording, ground_truth
 from simlan_data.recording.reader import RecordingReader
 
 NS = "robot_agent_1"
@@ -47,12 +47,7 @@ def run(src: Path, agent_type: str, out: Path) -> dict[str, float]:
         raise SystemExit(f"run of {agent_type} with {src} failed: {proc.stderr.strip()[-400:]}")
     metrics = json.loads((out / "metrics.json").read_text())
     with RecordingReader(out / "recording") as reader:
-        stops, prev = [], 0.0
-        for m in reader.messages([f"/{NS}/cmd_vel"]):
-            v = float(m.msg.twist.linear.x)
-            if prev >= 0.5 and abs(v) <= 0.05:
-                stops.append(m.stamp_ns)
-            prev = v
+        stops = emergency_stops(reader, NS)
         truth = {row[0]: row[1:3] for row in ground_truth(reader)[NS].iter_rows()}
         est = estimates_from_recording(reader, [NS])[NS].drop_nulls("x")
     near, far = [0.0], [0.0]

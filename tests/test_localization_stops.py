@@ -17,23 +17,12 @@ import pytest
 
 from conftest import run_cli
 from simlan_data.constants import NS_PER_S
-from simlan_data.evaluation.metrics import estimates_from_recording, ground_truth
+from simlan_data.evaluation.metrics import emergency_stops, estimates_from_recording, ground_truth
 from simlan_data.recording.reader import RecordingReader
 
 NS = "robot_agent_1"
 BOUND_M = 0.02  # the normal error of a 960x540 run (ATE max 1.2-1.5 cm, docs/benchmarks/gpss.md)
 AFTER_S = 0.5
-
-
-def emergency_stops(reader: RecordingReader, ns: str) -> list[int]:
-    """Stamps where the robot's applied command drops from driving (>= 0.5 m/s) to standing."""
-    stamps, prev = [], 0.0
-    for m in reader.messages([f"/{ns}/cmd_vel"]):
-        v = float(m.msg.twist.linear.x)
-        if prev >= 0.5 and abs(v) <= 0.05:
-            stamps.append(m.stamp_ns)
-        prev = v
-    return stamps
 
 
 def errors_after(reader: RecordingReader, ns: str, stops: list[int], after_s: float) -> list[float]:

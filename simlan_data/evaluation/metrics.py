@@ -170,6 +170,17 @@ def ground_truth(reader: RecordingReader) -> dict[str, pl.DataFrame]:
     return RecordedRows().read(reader).truth_tables()
 
 
+def emergency_stops(reader: RecordingReader, ns: str) -> list[int]:
+    """Stamps where the robot's applied command drops from driving (>= 0.5 m/s) to standing."""
+    stamps, prev = [], 0.0
+    for m in reader.messages([f"/{ns}/cmd_vel"]):
+        v = float(m.msg.twist.linear.x)
+        if prev >= 0.5 and abs(v) <= 0.05:
+            stamps.append(m.stamp_ns)
+        prev = v
+    return stamps
+
+
 def estimates_from_recording(reader: RecordingReader, namespaces: Iterable[str]) -> dict[str, pl.DataFrame]:
     """Pose estimates joined with localization status, per agent: stamp, x, y, yaw, observed, valid, age."""
     return RecordedRows(truth=False, estimates_of=namespaces).read(reader).estimate_tables()
