@@ -77,6 +77,15 @@ def test_recover_refuses_a_fifo_instead_of_blocking(bag: Path) -> None:
     _one_line_exit_2(proc, "recording.mcap: it is a FIFO")
 
 
+def test_a_fifo_without_metadata_is_named_not_sent_to_recover(bag: Path) -> None:
+    """A FIFO recording.mcap beside no metadata.yaml looked like a crashed run's bag: replay said
+    'recording is unfinished ... run recover', and recover then refused the FIFO."""
+    _fifo_mcap(bag)
+    (bag / "metadata.yaml").unlink()
+    proc = run_cli(str(bag), "--info", module="simlan_data.replay", timeout=HANG_S)
+    _one_line_exit_2(proc, "recording.mcap: it is a FIFO", "replace it by the real file")
+
+
 def test_a_device_as_the_recording_is_refused() -> None:
     proc = run_cli("/dev/zero", "--info", module="simlan_data.replay", timeout=HANG_S)
     _one_line_exit_2(proc, "/dev/zero: it is a character device")

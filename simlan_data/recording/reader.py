@@ -126,6 +126,8 @@ class RecordingReader:
         require_regular(p / "metadata.yaml", "recording metadata")
         if not (p / "metadata.yaml").is_file():
             if p.is_dir() and any(p.glob("*.mcap")):
+                for f in p.glob("*.mcap"):  # a FIFO named recording.mcap is no crashed run's bag
+                    require_regular(f, "recording file")
                 raise _unfinished(p)
             raise _bad(p, "no metadata.yaml (not a ROS 2 bag)", "point to a recording directory")
         self.path = p
