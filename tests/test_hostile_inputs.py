@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from reliability_cases import ALIAS_BOMB, _inflate, small_recording, wrong_type
+from reliability_cases import ALIAS_BOMB, _inflate, _meta, small_recording, wrong_type
 
 from conftest import REPO, run_cli
 from simlan_data.errors import EXIT_BAD_INPUT, RecordingInputError
@@ -119,6 +119,23 @@ def test_metadata_counts_that_disagree_with_the_file_are_refused(
 ) -> None:
     """--info printed metadata.yaml's counts as is: ``Messages: 100000000000000000000000``."""
     _inflate(bag, key, value)
+    proc = run_cli(str(bag), "--info", module="simlan_data.replay", timeout=HANG_S)
+    assert "Messages:" not in proc.stdout
+    _one_line_exit_2(proc, said, "python -m simlan_data.recover")
+
+
+@pytest.mark.parametrize(
+    ("value", "said"),
+    [
+        (10**23, "files[0] (recording.mcap) message_count is 100000000000000000000000, but its MCAP file's"),
+        (1e23, "files[0] message_count is not a non-negative integer"),
+    ],
+)
+def test_a_file_entry_s_count_that_disagrees_with_its_file_is_refused(
+    bag: Path, value: object, said: str
+) -> None:
+    """metadata.yaml's files[].message_count was never checked: 1e23 there opened as if intact."""
+    _meta(bag, lambda info: info["files"][0].__setitem__("message_count", value))
     proc = run_cli(str(bag), "--info", module="simlan_data.replay", timeout=HANG_S)
     assert "Messages:" not in proc.stdout
     _one_line_exit_2(proc, said, "python -m simlan_data.recover")

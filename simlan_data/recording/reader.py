@@ -16,8 +16,6 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import yaml
-from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
@@ -25,7 +23,10 @@ from rosbags.typesys.store import Typestore
 from simlan_data.constants import FORMAT_MAJOR, NS_PER_S, RECORDING_DIRNAME
 from simlan_data.errors import RecordingInputError
 from simlan_data.recording import losses, schema
-from simlan_data.recording.bounded import load_yaml_without_aliases, require_regular
+from simlan_data.recording.bounded import require_regular
+from simlan_data.recording.metadata_checks import MAX_METADATA_BYTES as MAX_METADATA_BYTES
+from simlan_data.recording.metadata_checks import bad as _bad
+from simlan_data.recording.metadata_checks import check_counts_against_files, first_line, read_metadata
 from simlan_data.recording.run_marker import read_running, writer_alive
 from simlan_data.recording.timebase import format_epoch, recorded_epoch
 
@@ -55,11 +56,6 @@ class TopicInfo:
     name: str
     msgtype: str
     count: int
-
-
-def _bad(path: Path, why: str, fix: str = "") -> RecordingInputError:
-    fix = fix or f"run `python -m simlan_data.recover {path}` to rebuild what is readable, or record it again"
-    return RecordingInputError("not a readable recording", str(path), why, fix)
 
 
 @cache
@@ -132,7 +128,7 @@ class RecordingReader:
             raise _bad(p, "no metadata.yaml (not a ROS 2 bag)", "point to a recording directory")
         self.path = p
         self._store: Typestore = schema.typestore()
-        self._metadata = _read_metadata(p)  # size and fields checked before rosbags trusts them
+        self._metadata = read_metadata(p)  # size and fields checked before rosbags trusts them
         files = [p / str(f) for f in self._metadata.get("relative_file_paths") or []]
         for f in files:  # rosbags opens them: a FIFO would block it
             require_regular(f, "recording file", missing_ok=True)
@@ -146,10 +142,10 @@ class RecordingReader:
                 self._reader.end_time,
             ]
         except Exception as err:  # rosbags raises assorted errors on corrupt input
-            raise _bad(p, f"{type(err).__name__}: {_first(err)}") from err
+            raise _bad(p, f"{type(err).__name__}: {first_line(err)}") from err
         if not all(isinstance(n, int) and not isinstance(n, bool) for n in counts):
             raise _bad(p, "metadata.yaml holds a message count or time that is not an integer")
-        _check_counts_against_files(p, self._metadata, files)
+        check_counts_against_files(p, self._metadata, files)
         self._small: list[tuple[Any, int, bytes]] | None = None  # see STREAMED_TYPES
         self._small_pickled: bytes | None = None  # see adopt_small_topics
         self._register_bag_types()
@@ -302,7 +298,7 @@ class RecordingReader:
         except Exception as err:
             raise _bad(
                 self.path,
-                f"{type(err).__name__} while reading messages: {_first(err)}",
+                f"{type(err).__name__} while reading messages: {first_line(err)}",
             ) from err
 
     def deserialize(self, raw: Message) -> Message:
@@ -313,7 +309,7 @@ class RecordingReader:
             raise RecordingInputError(
                 "message undecodable",
                 f"{self.path} topic {raw.topic} at {raw.stamp_ns} ns",
-                f"{type(err).__name__}: {_first(err)}",
+                f"{type(err).__name__}: {first_line(err)}",
                 f"the recording is corrupt; `python -m simlan_data.recover {self.path}` keeps its intact chunks",
             ) from err
         return Message(raw.topic, raw.stamp_ns, raw.msgtype, msg)
@@ -478,117 +474,6 @@ class RecordingReader:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-# simlan_data writes a few KiB (about 300 bytes a topic); PyYAML and then rosbags' ruamel parse
-# 256 KiB in about 1.5 s together (a MiB took 7 s)
-MAX_METADATA_BYTES = 256 << 10
-
-
-def _read_metadata(path: Path) -> dict[str, Any]:
-    """The rosbag2_bagfile_information of metadata.yaml (already validated by rosbags)."""
-    meta = path / "metadata.yaml"
-    st = require_regular(meta, "recording metadata", missing_ok=False)
-    if st is not None and st.st_size > MAX_METADATA_BYTES:
-        raise _bad(
-            path,
-            f"metadata.yaml is {st.st_size} bytes, more than the {MAX_METADATA_BYTES} a recording's has room for",
-        )
-    try:
-        data = load_yaml_without_aliases(meta.read_bytes()[: MAX_METADATA_BYTES + 1])
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise _bad(path, f"metadata.yaml unreadable: {_first(err)}") from err
-    except RecursionError:
-        raise _bad(path, "metadata.yaml is nested too deeply") from None
-    info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
-    if not isinstance(info, dict):
-        raise _bad(path, "metadata.yaml lacks rosbag2_bagfile_information")
-    custom = info.get("custom_data")
-    if custom is not None and not (
-        isinstance(custom, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in custom.items())
-    ):
-        raise _bad(path, "metadata.yaml custom_data is not a mapping of strings")
-    _check_metadata_fields(path, info)
-    return info
-
-
-def _is_count(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
-
-
-def _check_metadata_fields(path: Path, info: dict[str, Any]) -> None:
-    """The fields rosbags takes on trust: counts and times are integers, topics have names and types."""
-    for key, sub in (
-        ("message_count", None),
-        ("duration", "nanoseconds"),
-        ("starting_time", "nanoseconds_since_epoch"),
-    ):
-        value = info.get(key)
-        if sub is not None:
-            value = value.get(sub) if isinstance(value, dict) else None
-        if not _is_count(value):
-            raise _bad(path, f"metadata.yaml {key}{'.' + sub if sub else ''} is not a non-negative integer")
-    topics = info.get("topics_with_message_count")
-    if not isinstance(topics, list):
-        raise _bad(path, "metadata.yaml topics_with_message_count is not a list")
-    for i, entry in enumerate(topics):
-        meta = entry.get("topic_metadata") if isinstance(entry, dict) else None
-        if not (
-            isinstance(meta, dict)
-            and isinstance(meta.get("name"), str)
-            and isinstance(meta.get("type"), str)
-            and _is_count(entry.get("message_count"))
-        ):
-            raise _bad(
-                path, f"metadata.yaml topics_with_message_count[{i}] lacks a name, type or integer count"
-            )
-
-
-def _check_counts_against_files(path: Path, info: dict[str, Any], files: list[Path]) -> None:
-    """metadata.yaml's message counts, start and duration against the MCAP files' own summary
-    statistics (rosbags takes metadata.yaml's on trust: ``message_count: 10**23`` was printed as
-    is). Files without a summary are not checked (rosbags refuses those anyway)."""
-    total, per_topic, first, last = 0, dict[str, int](), None, None
-    for f in files:
-        try:
-            with f.open("rb") as fh:
-                summary = make_reader(fh).get_summary()
-        except Exception:  # rosbags read it: only its summary is unusable here
-            return
-        if summary is None or summary.statistics is None:
-            return
-        stats = summary.statistics
-        total += stats.message_count
-        for cid, n in stats.channel_message_counts.items():
-            topic = summary.channels[cid].topic if cid in summary.channels else f"channel {cid}"
-            per_topic[topic] = per_topic.get(topic, 0) + n
-        if stats.message_count:
-            first = min(first if first is not None else stats.message_start_time, stats.message_start_time)
-            last = max(last if last is not None else stats.message_end_time, stats.message_end_time)
-    claimed: dict[str, int] = {}
-    for entry in info.get("topics_with_message_count") or []:
-        name = entry["topic_metadata"]["name"]
-        claimed[name] = claimed.get(name, 0) + entry["message_count"]
-    wrong = [("message_count", info["message_count"], total)]
-    wrong += [
-        (f"topics_with_message_count {t}", claimed.get(t, 0), per_topic.get(t, 0))
-        for t in sorted(set(claimed) | set(per_topic))
-    ]
-    if first is not None and last is not None:
-        wrong.append(("starting_time", info["starting_time"]["nanoseconds_since_epoch"], first))
-        wrong.append(("duration", info["duration"]["nanoseconds"], last - first))
-    for key, said, found in wrong:
-        if said != found:
-            raise _bad(
-                path,
-                f"metadata.yaml {key} is {said}, but its MCAP file's summary says {found}",
-                f"run `python -m simlan_data.recover {path}` to rebuild metadata.yaml from the file",
-            )
-
-
-def _first(err: BaseException) -> str:
-    text = str(err).strip().splitlines()
-    return text[0] if text else type(err).__name__
 
 
 def _human_bytes(n: float) -> str:
