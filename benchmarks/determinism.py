@@ -16,7 +16,9 @@ deflate bytes, not different pixels).
 (``PYTHONPATH=DIR``), for the before/after comparison in docs/benchmarks/determinism.md.
 
 Prints markdown for docs/benchmarks/determinism.md; writes the raw numbers as JSON (default
-``benchmarks/results/determinism_<date>.json``).
+``benchmarks/results/determinism_<date>.json``, ``_<date>_2.json``... when that exists: a run never
+overwrites an earlier one). A quick check of fewer than ``FIGURE_RUNS`` runs is no figure of
+BENCHMARKS.md: its JSON goes beside its run directories (``determinism.json``), not into results.
 """
 
 from __future__ import annotations
@@ -37,6 +39,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import REPO, machine
 
 FILES = ("recording/recording.mcap", "recording/metadata.yaml")
+RESULTS = REPO / "benchmarks" / "results"
+FIGURE_RUNS = 100  # the repeated-run figure of BENCHMARKS.md (issue 21)
+
+
+def default_json(runs: int, root: Path, today: datetime.date, results: Path = RESULTS) -> Path:
+    """Where a run without ``--json`` writes its raw numbers: a quick check (fewer than
+    FIGURE_RUNS runs) beside its run directories; a full run into ``results`` under a name no
+    earlier file has (``--runs 2`` overwrote the day's 100-run file, the figure of BENCHMARKS.md)."""
+    if runs < FIGURE_RUNS:
+        return root / "determinism.json"
+    out, n = results / f"determinism_{today}.json", 2
+    while out.exists():
+        out, n = results / f"determinism_{today}_{n}.json", n + 1
+    return out
 
 
 def _start(src: Path, run_dir: Path, duration: float, seed: int) -> subprocess.Popen[bytes]:
@@ -180,9 +196,7 @@ def main() -> None:
     print(f"wall time {raw['wall_s']} s")
     for r in differing:
         print(f"- {r['run']} ({r['mode']}) differs: {json.dumps(r['differences'])}")
-    out = (
-        args.json or REPO / "benchmarks" / "results" / f"determinism_{datetime.date.today()}.json"
-    )  # audit-ok: file name
+    out = args.json or default_json(args.runs, root, datetime.date.today())  # audit-ok: file name
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(raw, indent=1) + "\n")
     print(f"raw numbers: {out}")

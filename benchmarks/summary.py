@@ -57,7 +57,7 @@ def _determinism(d: dict[str, Any]) -> list[Figure]:
     return [
         {"id": "determinism", "figure": f"default runs ({d['duration_s']:g} s) byte-identical, half of them side by side",
          "value": same, "unit": f"of {runs}", "target": f"{runs} of {runs}",
-         "note": f"code {d['commit']}", "history": "docs/benchmarks/determinism.md"},
+         "note": f"code {d['commit']}", "baseline": d.get("baseline", ""), "history": "docs/benchmarks/determinism.md"},
     ]  # fmt: skip
 
 
@@ -66,7 +66,7 @@ def _shutdown(d: dict[str, Any]) -> list[Figure]:
     return [
         {"id": "signal_to_bag", "figure": "SIGTERM/SIGINT to a finalized bag: slowest of "
          f"{len(d['trials'])} ({ok} finalized)", "value": d["bag_s_max"], "unit": "s", "target": "<= 2 s",
-         "history": "docs/benchmarks/hardening.md"},
+         "baseline": d.get("baseline", ""), "history": "docs/benchmarks/hardening.md"},
     ]  # fmt: skip
 
 
@@ -81,6 +81,19 @@ def _reliability(d: dict[str, Any]) -> list[Figure]:
          "exactly the reference's beginning)", "value": round(max(k["loss_at_most_s"] for k in kills), 2),
          "unit": "s", "target": "<= flush period (1 s)", "history": "docs/benchmarks/hardening.md"},
     ]  # fmt: skip
+    hard = d.get("hardening")
+    if hard:  # issue 21's hostile CLI input and behaviour tests, each with expected and observed
+        ok = sum(c["ok"] for c in hard["hostile_inputs"]) + sum(
+            t["observed"] == "passed" for t in hard["behaviour_tests"]
+        )
+        n = len(hard["hostile_inputs"]) + len(hard["behaviour_tests"])
+        out.append(
+            {"id": "hardening_cases", "figure": f"issue 21's cases as expected: {len(hard['hostile_inputs'])} hostile "
+             f"CLI inputs (exit 2, one line, <= 5 s: slowest {max(c['wall_s'] for c in hard['hostile_inputs'])} s) "
+             f"and {len(hard['behaviour_tests'])} behaviour tests", "value": ok, "unit": f"of {n}",
+             "target": f"{n} of {n}", "baseline": "before issue 21: the 6 inputs hung or were answered wrongly (as the issue lists)",
+             "history": "docs/benchmarks/hardening.md"}
+        )  # fmt: skip
     if flush is not None and off is not None:
         out.append(
             {"id": "flush_rtf", "figure": "real-time factor with the 1 s flush (default run, 20 s)",

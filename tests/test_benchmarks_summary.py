@@ -88,3 +88,25 @@ def test_a_raw_file_nobody_reads_is_refused(tmp_path: Path) -> None:
     path = _write(tmp_path / "mystery_2026-01-01.json", command="python b.py", rows=[])
     with pytest.raises(ValueError, match="no extractor for 'mystery'"):
         summary.figures_of(path)
+
+
+def test_a_short_determinism_run_never_overwrites_the_figure_s_file(tmp_path: Path) -> None:
+    """`benchmarks/determinism.py --runs 2` wrote determinism_<date>.json over the day's 100-run
+    file, and so replaced BENCHMARKS.md's 100 of 100 by 2 of 2."""
+    import datetime
+
+    spec = importlib.util.spec_from_file_location(
+        "benchmarks_determinism", REPO / "benchmarks" / "determinism.py"
+    )
+    assert spec is not None and spec.loader is not None
+    determinism = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(determinism)
+    results, runs_root, day = tmp_path / "results", tmp_path / "runs", datetime.date(2026, 11, 26)
+    results.mkdir()
+    assert determinism.default_json(2, runs_root, day, results) == runs_root / "determinism.json"
+    first = determinism.default_json(100, runs_root, day, results)
+    assert first == results / "determinism_2026-11-26.json"
+    first.write_text("{}")
+    second = determinism.default_json(100, runs_root, day, results)
+    assert second == results / "determinism_2026-11-26_2.json"
+    assert summary._family(second) == "determinism"  # still read by BENCHMARKS.md's extractor
