@@ -163,8 +163,8 @@ def test_a_topic_of_the_wrong_type_is_named_with_both_types(bag: Path, tmp_path:
 
 
 def test_replay_checks_every_topic_schema_names_before_it_starts(tmp_path: Path) -> None:
-    """Not only the required topics: a replay interprets every topic by its name. Readers that
-    dispatch on the type (the Rerun export) still read it."""
+    """Not only the required topics: a replay interprets every topic by its name. The reader
+    itself still reads it."""
     bag = tmp_path / "golden" / "recording"
     shutil.copytree(REPO / "recordings" / "golden" / "single_truck" / "recording", bag)
     wrong_type(bag, "/robot_agent_1/cmd_vel")
@@ -261,4 +261,19 @@ def test_view_refuses_a_bad_recording_and_leaves_no_directory(bag: Path, tmp_pat
     save = tmp_path / "new" / "run.rrd"
     proc = run_cli(str(bag), "--save", str(save), module="simlan_data.view", timeout=HANG_S)
     _one_line_exit_2(proc, "message_count is 100000000000000000000000")
+    assert not (tmp_path / "new").exists()
+
+
+def test_view_refuses_a_topic_of_the_wrong_type_and_writes_no_file(bag: Path, tmp_path: Path) -> None:
+    """The Rerun export reads ground truth, estimates and camera topics by name: a String
+    /ground_truth/poses failed with 'run failed: AttributeError ... transforms' (exit 1) and left
+    a partial .rrd behind."""
+    wrong_type(bag)
+    save = tmp_path / "new" / "run.rrd"
+    proc = run_cli(str(bag), "--save", str(save), module="simlan_data.view", timeout=HANG_S)
+    _one_line_exit_2(
+        proc,
+        "recording topic /ground_truth/poses has the wrong message type",
+        "found std_msgs/msg/String, expected tf2_msgs/msg/TFMessage",
+    )
     assert not (tmp_path / "new").exists()

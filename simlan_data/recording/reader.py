@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
-from collections.abc import Iterable, Iterator
+from collections.abc import Collection, Iterable, Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -241,8 +241,8 @@ class RecordingReader:
     def check_types(self, topics: Iterable[str] | None = None) -> None:
         """Refuse any of ``topics`` (all if None) whose type is not the one :mod:`schema` gives its
         name: for readers that interpret topics by name (a String /ground_truth/poses made replays
-        fail with a KeyError or AttributeError deep inside). Readers that dispatch on the type
-        (the Rerun export) read any type."""
+        fail with a KeyError or AttributeError deep inside; the Rerun export too). This reader
+        itself reads any type."""
         wanted = None if topics is None else set(topics)
         for c in self._reader.connections:
             if wanted is not None and c.topic not in wanted:
@@ -255,6 +255,11 @@ class RecordingReader:
                     f"found {c.msgtype}, expected {' or '.join(expected)} (simlan_data.recording.schema)",
                     "record it with simlan_data, or make the tool that wrote it publish that type",
                 )
+
+    def check_types_of(self, types: Collection[str]) -> None:
+        """:meth:`check_types` for the topics whose schema type is one of ``types``: those a reader
+        takes by their names (the Rerun export shows the others, such as events, by their type)."""
+        self.check_types([t for t in self.topics if set(expected_types(t)) & set(types)])
 
     def _register_bag_types(self) -> None:
         """Register message types that the bag defines and our typestore lacks."""

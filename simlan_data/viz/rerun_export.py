@@ -546,6 +546,7 @@ def export(
             f"invalid --image-every {image_every}", "arguments", "must be >= 1", "e.g. 1 (every image)"
         )
     with RecordingReader(recording) as reader:
+        reader.check_types_of(HANDLED_TYPES - {MARKER_ARRAY_TYPE} | {schema.STRING_TYPE})  # read by name
         rec = rr.RecordingStream(APP_ID, recording_id=str(reader.path.resolve()))
         rec.set_log_time_enabled(False)  # the simulated clock is the only time: same recording, same file
         rec.set_log_tick_enabled(False)
