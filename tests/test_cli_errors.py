@@ -127,6 +127,7 @@ def test_existing_recording_is_never_touched(tmp_path: Path) -> None:
     assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml"]
 
 
+@pytest.mark.usefixtures("installed_packages_unchanged")  # (the cache key includes the plug-ins)
 def test_fast_help_is_hydras_help_word_for_word(tmp_path: Path) -> None:
     """``--help`` is composed once by simlan_data.apps.help, then served from its cache; with a
     config directory on the command line Hydra renders its own: the three texts must be the same."""
@@ -139,6 +140,7 @@ def test_fast_help_is_hydras_help_word_for_word(tmp_path: Path) -> None:
     assert len(list((tmp_path / "help").glob("*.txt"))) == 1  # (Hydra's own help is not cached)
 
 
+@pytest.mark.usefixtures("installed_packages_unchanged")  # (the cache key includes the plug-ins)
 def test_help_cache_is_used_and_a_changed_config_file_invalidates_it(tmp_path: Path) -> None:
     """The second --help prints the stored text (planted here to tell it apart); touching a
     config file the help is made of, or asking for another config, composes it again."""

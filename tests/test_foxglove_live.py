@@ -6,14 +6,16 @@ recording has."""
 from __future__ import annotations
 
 import json
+import re
 import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import cv2
 import numpy as np
@@ -37,10 +39,35 @@ CAMERA = "/camera_160/image_raw/compressed"
 WANTED = (CAMERA, "/camera_160/camera_info", schema.TF, schema.TF_STATIC)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+class Console:
+    """One output stream of a run, read on a thread as it comes (the test waits for a line)."""
+
+    def __init__(self, stream: IO[str]) -> None:
+        self.lines: list[str] = []
+        self._reader = threading.Thread(target=self._read, args=(stream,), daemon=True)
+        self._reader.start()
+
+    def _read(self, stream: IO[str]) -> None:
+        for line in stream:
+            self.lines.append(line)
+
+    def served_port(self, *, within_s: float) -> int:
+        """The port of ``live view on ws://HOST:PORT``: with live.port=0 the run binds any free
+        port and prints which (a port chosen here and then bound by the run could be taken in
+        between, by a test running in parallel for one)."""
+        deadline = time.monotonic() + within_s
+        while time.monotonic() < deadline:
+            for line in list(self.lines):
+                if found := re.search(r"live view on ws://[^\s/]+:(\d+)\b", line):
+                    return int(found.group(1))
+            if not self._reader.is_alive():
+                break
+            time.sleep(0.1)
+        raise OSError(f"the run did not say where it serves the live view (waited up to {within_s:.0f} s)")
+
+    def text(self) -> str:
+        self._reader.join(timeout=10)
+        return "".join(self.lines)
 
 
 class Client:
@@ -147,29 +174,31 @@ def live_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Client, Cl
     """A real run served live (at the wall clock's pace, 5 s); one client from the start, and one
     that connects once the simulation has been running (the latched topics were published then)."""
     run_dir = tmp_path_factory.mktemp("live") / "run"
-    port = _free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "simlan_data.run", *SMALL, "duration_s=5", f"hydra.run.dir={run_dir}"]
-        + ["live.foxglove=true", f"live.port={port}", "live.realtime=true"],
+        + ["live.foxglove=true", "live.port=0", "live.realtime=true"],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+    assert proc.stdout is not None and proc.stderr is not None
+    out, errors = Console(proc.stdout), Console(proc.stderr)
     got: dict[str, int] = {}
     try:
+        port = out.served_port(within_s=180)  # (a loaded machine starts slowly)
         with ExitStack() as stack:
-            early = Client(port, WANTED, stack, within_s=180)  # (a loaded machine starts slowly)
+            early = Client(port, WANTED, stack, within_s=30)
             early.receive_until(Client.has_all, within_s=90)
             got = {t: len(v) for t, v in early.received.items()}
             late = Client(port, (schema.TF_STATIC, schema.CONFIG), stack, within_s=0)  # the run is under way
             late.receive_until(Client.has_all, within_s=10)
-        proc.communicate(timeout=120)
+        proc.wait(timeout=120)
     except OSError as err:
         proc.kill()
-        out, errors = proc.communicate()
+        proc.wait()
         raise AssertionError(
-            f"{err}; the first client got {got}; the run said: {out[-2000:]} {errors[-2000:]}"
+            f"{err}; the first client got {got}; the run said: {out.text()[-2000:]} {errors.text()[-2000:]}"
         ) from err
     finally:
         proc.kill()

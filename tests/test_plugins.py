@@ -20,6 +20,8 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from conftest import installed_packages_held
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "simlan_centroid_localizer"
 # two cameras over the truck's start (160, 161), half resolution: the marker is still found
@@ -69,7 +71,8 @@ class Boom(CentroidLocalizer):
 def plugin_installed() -> None:
     """The example package, installed editable into this interpreter's environment (loudly)."""
     cmd = [sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "-e", str(EXAMPLE)]
-    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
+    with installed_packages_held():  # (tests in other processes may need the installed plug-ins unchanged)
+        done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, f"installing the example plug-in failed:\n{done.stdout}\n{done.stderr}"
     found = {ep.name: ep.value for ep in entry_points(group="simlan_data.algorithms")}
     assert found.get("centroid") == "simlan_centroid_localizer:CentroidLocalizer", found
