@@ -96,9 +96,17 @@ class RouteGraph:
         dist, index = self.tree.query(np.asarray(xy, dtype=float))
         return int(index) if np.isfinite(dist) and dist <= within_m else None
 
-    def distances_to(self, node: int) -> NDArray[np.float64]:
-        """Shortest route length from every node to ``node`` (inf where unreachable)."""
-        return dijkstra(self.matrix, directed=False, indices=node)
+    def distances_to(
+        self, node: int, *, avoid: NDArray[np.bool_] | None = None, penalty_m: float = 1000.0
+    ) -> NDArray[np.float64]:
+        """Shortest route length from every node to ``node`` (inf where unreachable); with
+        ``avoid``, every edge touching an avoided node costs ``penalty_m`` more (routes that avoid
+        them come first, those through them still count)."""
+        if avoid is None or not avoid.any():
+            return dijkstra(self.matrix, directed=False, indices=node)
+        m = self.matrix.tocoo()
+        data = m.data + penalty_m * (avoid[m.row] | avoid[m.col])
+        return dijkstra(csr_matrix((data, (m.row, m.col)), shape=m.shape), directed=False, indices=node)
 
 
 def build_route_graph(

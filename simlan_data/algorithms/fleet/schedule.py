@@ -35,12 +35,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.fleet import footprint as fp
+from simlan_data.algorithms.fleet.conflicts import ConflictCache
 from simlan_data.algorithms.fleet.footprint import Region, Shape
 from simlan_data.algorithms.fleet.graph import RouteGraph
 
 START = -1  # ``prev`` of the start state: the robot stands at its real pose
 FROM_START = -2  # ``prev`` of the first vertex after it: the edge starts at the real pose
-MAX_EXPANSIONS = 200_000  # a search that expands more states than this gives up (reported blocked)
+PENALTY_M = 1000.0  # the search's guide avoids nodes held to the horizon at this extra cost
+MAX_EXPANSIONS = 40_000  # a search that expands more states than this gives up (reported blocked)
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,7 @@ class Request:
     heading_rad: float | None = None  # None: may leave the start in any direction
     goal_xy: tuple[float, float] | None = None  # the real goal, driven to from the goal node
     start_turnable: bool = True  # it may turn in place where it stands
+    idle: bool = False  # every goal done: its goal is where it parks; it moves aside, never goes first
 
     @property
     def radius_m(self) -> float:
@@ -112,6 +115,8 @@ class FleetPlan:
     plans: dict[str, RobotPlan] = field(default_factory=dict)
     failures: dict[str, str] = field(default_factory=dict)  # name -> unreachable | blocked
     order: list[str] = field(default_factory=list)  # the priority order that was used
+    # robot -> robots planned after it whose standing place keeps it from its goal
+    blockers: dict[str, list[str]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -134,9 +139,13 @@ class Reservations:
         self.graph, self.horizon, self.safety_m = graph, horizon, safety_m
         self.parts: list[list[Region]] = [[] for _ in range(horizon + 1)]
         self._merged: dict[int, Region] = {}
-        self.waiting: dict[str, Region] = {}  # robots not planned yet, where they stand
+        # robots not planned yet: where they stand, and until which step (the time they need to
+        # get out of the way; after it, a robot planned earlier may take the place and the later one
+        # must leave in time, or fail and go first)
+        self.waiting: dict[str, tuple[Region, int, bool]] = {}  # region, until, idle
+        self.conflicts = ConflictCache(self)
 
-    def set_waiting(self, waiting: dict[str, Region]) -> None:
+    def set_waiting(self, waiting: dict[str, tuple[Region, int, bool]]) -> None:
         self.waiting = waiting
         self._merged.clear()
 
@@ -158,26 +167,21 @@ class Reservations:
                 self.add(k, v.occ)
 
     def at(self, step: int) -> Region | None:
-        parts = self.parts[step] + list(self.waiting.values())
+        parts = self.parts[step] + [reg for reg, until, _ in self.waiting.values() if step <= until]
         if not parts:
             return None
         if step not in self._merged:
             self._merged[step] = fp.region(*parts)
         return self._merged[step]
 
-    def near(self, step: int, extent_m: float) -> NDArray[np.bool_] | None:
-        """Nodes within ``extent_m`` plus the safety distance of anything held at ``step``."""
+    def blocked_nodes(self, step: int, radius_m: float) -> NDArray[np.bool_]:
+        """Nodes where a disc of ``radius_m`` conflicts with what is held at ``step``."""
         held = self.at(step)
         if held is None:
-            return None
-        p, q, r = held
-        out = np.zeros(self.graph.size, dtype=bool)
-        for a, b, rad in zip(p, q, r):
-            n = max(2, int(np.ceil(np.linalg.norm(b - a) / 0.5)) + 1)
-            pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-            for hits in self.graph.tree.query_ball_point(pts, rad + self.safety_m + extent_m + 0.25):
-                out[hits] = True
-        return out
+            return np.zeros(self.graph.size, dtype=bool)
+        xy = self.graph.xy
+        d = fp.segment_distances(xy, xy, held[0], held[1])
+        return np.asarray((d < radius_m + held[2][None, :] + self.safety_m).any(axis=1), dtype=bool)
 
 
 def plan_fleet(
@@ -188,18 +192,39 @@ def plan_fleet(
     by_name = {r.name: r for r in requests}
     promoted: set[str] = set()
     standing: set[str] = set()  # failed even when first: stands still, for everyone
+    ahead: set[tuple[str, str]] = set()  # (blocker, robot): the blocker was moved before it once
     while True:
         result = _plan_in_order(graph, [by_name[n] for n in order], obstacles, timing, standing)
+        moved = _blockers_first(order, result.blockers, ahead)
+        if moved is not None:
+            order = moved  # a robot standing in an earlier one's way is planned (out of it) first
+            continue
         failed = [n for n in order if n in result.failures and n not in standing]
         if not failed:
             result.order = order
             return result
         first = failed[0]
-        if first in promoted:  # no plan even first: the others must plan around where it stands
+        if first in promoted or by_name[first].idle:  # no plan even first (an idle robot never goes
+            # first): the others must plan around where it stands
             standing.add(first)
             continue
         promoted.add(first)  # priority inheritance: it goes first, everyone is planned again
         order = [first] + [n for n in order if n != first]
+
+
+def _blockers_first(
+    order: list[str], blockers: dict[str, list[str]], ahead: set[tuple[str, str]]
+) -> list[str] | None:
+    """The order with the blockers of the first blocked robot moved just before it (each pair at most
+    once, so the replanning ends), or None when there is nothing to move."""
+    for name in order:
+        new = [b for b in blockers.get(name, []) if (b, name) not in ahead]
+        if new:
+            ahead.update((b, name) for b in new)
+            rest = [n for n in order if n not in new]
+            at = rest.index(name)
+            return rest[:at] + new + rest[at:]
+    return None
 
 
 def _standing(r: Request) -> RobotPlan:
@@ -231,11 +256,13 @@ def _plan_in_order(
             pending.append(r)
     # a robot keeps off where the robots after it stand (they may not get away in time: a robot
     # planned earlier does not drive through one that cannot turn or has nowhere to go)
-    waiting = {r.name: _start_region(r, turn=False) for r in pending}
+    waiting = {r.name: (_start_region(r, turn=False), _clear_steps(r, timing), r.idle) for r in pending}
     for r in pending:
         del waiting[r.name]
         table.set_waiting(dict(waiting))
         plan = _plan_one(graph, r, table, timing)
+        if waiting and (plan is None or not plan.complete):
+            out.blockers[r.name] = _blocking(graph, r, table, timing, waiting)
         if plan is None:
             out.failures[r.name] = "blocked"
             plan = _standing(r)
@@ -244,11 +271,47 @@ def _plan_in_order(
     return out
 
 
+def _blocking(
+    graph: RouteGraph,
+    r: Request,
+    table: Reservations,
+    timing: Timing,
+    waiting: dict[str, tuple[Region, int, bool]],
+) -> list[str]:
+    """The robots not planned yet whose standing places keep ``r`` from its goal: those its plan
+    would cross if they were not there (none when it cannot reach its goal even then)."""
+    table.set_waiting({})
+    try:
+        free = _plan_one(graph, r, table, timing)
+    finally:
+        table.set_waiting(waiting)
+    if free is None or not free.complete or free.queued:
+        return []
+    idle = {n for n, w in waiting.items() if w[2]}
+    return [
+        n
+        for n, (standing, _, _) in waiting.items()
+        if n not in idle
+        and any(fp.conflict(v.occ, standing, 0.0 if v.loose else timing.safety_m) for v in free.vertices)
+    ]
+
+
+def _clear_steps(r: Request, timing: Timing) -> int:
+    """Steps a robot needs to get off where it stands: a turn and its length plus the safety distance."""
+    return 1 + timing.steps(r.shape.front_m - r.shape.back_m + timing.safety_m)
+
+
 def _plan_one(graph: RouteGraph, r: Request, table: Reservations, timing: Timing) -> RobotPlan | None:
     """Space-time A* to the goal, or to a queue node outside it when the goal is held."""
     assert r.goal is not None
     search = _Search(graph, r, table, timing)
-    dist = graph.distances_to(r.goal)
+    # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
+    # obstacles), so a detour round a lane that stays blocked is found without searching the lane
+    dist = graph.distances_to(
+        r.goal, avoid=table.blocked_nodes(timing.horizon, r.shape.half_width_m), penalty_m=PENALTY_M
+    )
+    if not dist[r.start] < PENALTY_M:  # every way passes something held later: pass it before
+        dist = graph.distances_to(r.goal)
     if not search.held_at(r.goal, timing.horizon):  # free at the horizon: go there
         plan = search.run(r.goal, dist, tail=r.goal_xy)
         if plan is not None:
@@ -290,26 +353,12 @@ class _Search:
     def __init__(self, graph: RouteGraph, r: Request, table: Reservations, timing: Timing) -> None:
         self.graph, self.r, self.table, self.timing = graph, r, table, timing
         self.start_xy = np.asarray(r.start_xy, dtype=float)
-        offset = float(np.linalg.norm(self.start_xy - graph.xy[r.start]))
-        snap = 1.5 * timing.spacing_m  # the real goal lies this far from its node at most
-        self.extent = (
-            float(graph.lengths_m.max(initial=0.0)) + offset + snap + r.shape.reach_m + r.shape.half_width_m
-        )
         self.turnable = graph.turnable(r.shape.reach_m).tolist()
         self._bad: dict[int, NDArray[np.bool_] | None] = {}
         self._free: dict[tuple, bool] = {}
         self._regions: dict[tuple, Region] = {}
-        # shared pieces: every directed edge driven, then a turn in place at every node
-        arcs, shape = graph.arcs, r.shape
-        a, b = graph.xy[arcs[:, 0]], graph.xy[arcs[:, 1]]
-        d = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1), 1e-9)[:, None]
-        self.n_arcs = len(arcs)
-        self.unit_p = np.concatenate([a + shape.back_m * d, graph.xy])
-        self.unit_q = np.concatenate([b + shape.front_m * d, graph.xy])
-        self.unit_r = np.concatenate(
-            [np.full(len(arcs), shape.half_width_m), np.full(graph.size, shape.reach_m)]
-        )
-        self.unit_anchor = np.concatenate([arcs[:, 1], np.arange(graph.size)])
+        self.pieces = table.conflicts.pieces(r.shape)  # shared: every directed edge, every turn
+        self.n_arcs = self.pieces.n_arcs
         self.tail: tuple[float, float] | None = None
         self.target = -1
 
@@ -328,8 +377,7 @@ class _Search:
         """What the robot holds for a vertex (see the module docstring)."""
         units, specials = self._units(node, prev, turn)
         parts = [self._special(k) for k in specials]
-        for u in units:
-            parts.append((self.unit_p[u : u + 1], self.unit_q[u : u + 1], self.unit_r[u : u + 1]))
+        parts += [self.pieces.piece(u) for u in units]
         return fp.region(*parts)
 
     def _units(self, node: int, prev: int, turn: bool) -> tuple[list[int], list[tuple]]:
@@ -361,19 +409,7 @@ class _Search:
     def _bad_units(self, step: int) -> NDArray[np.bool_] | None:
         """Per shared piece: whether it conflicts with what is held at ``step`` (None: nothing is)."""
         if step not in self._bad:
-            near = self.table.near(step, self.extent)
-            if near is None:
-                self._bad[step] = None
-            else:
-                held = self.table.at(step)
-                assert held is not None
-                cand = np.flatnonzero(near[self.unit_anchor])
-                bad = np.zeros(len(self.unit_r), dtype=bool)
-                if len(cand):
-                    d = fp.segment_distances(self.unit_p[cand], self.unit_q[cand], held[0], held[1])
-                    lim = self.unit_r[cand][:, None] + held[2][None, :] + self.timing.safety_m
-                    bad[cand] = (d < lim).any(axis=1)
-                self._bad[step] = bad
+            self._bad[step] = self.table.conflicts.bad(self.r.shape, step)
         return self._bad[step]
 
     def free(self, step: int, parts: tuple[tuple[int, int, bool], ...]) -> bool:
@@ -428,7 +464,6 @@ class _Search:
             s = (r.start, 0, START, turn)
             parent[s] = None
             heapq.heappush(heap, (h[r.start], tie := tie + 1, s))
-        best_end: tuple[float, State] | None = None
         expanded = 0
         while heap and expanded < MAX_EXPANSIONS:
             _, _, state = heapq.heappop(heap)
@@ -436,10 +471,9 @@ class _Search:
             u, k, prev, turn = state
             if u == target and (prev != START or dist[r.start] == 0) and self._holds(state):
                 return self._plan(parent, state, complete=True)
-            if k >= horizon:
-                if best_end is None or h[u] < best_end[0]:
-                    best_end = (h[u], state)
-                continue
+            if k >= horizon:  # the first state popped at the horizon ends nearest to the target
+                # (consistent heuristic, f = horizon + h): the windowed plan
+                return self._plan(parent, state, complete=False)
             for nxt in self._moves(state):
                 if nxt in parent:
                     continue
@@ -449,7 +483,7 @@ class _Search:
                     continue
                 parent[nxt] = state
                 heapq.heappush(heap, (nxt[1] + h[nxt[0]], tie := tie + 1, nxt))
-        return self._plan(parent, best_end[1], complete=False) if best_end is not None else None
+        return None  # it cannot even keep clear until the horizon (or the search gave up)
 
     def _holds(self, state: State) -> bool:
         u, k, prev, turn = state
