@@ -1,18 +1,17 @@
-"""The fleet coordinator (algorithms/coordinator=fleet) at algorithm level: a kinematic fleet of
-point robots follows the coordinator's routes under its speed limits, tick by tick, on small
-synthetic layouts and on the real layout's route graph. Fast, no simulator."""
+"""The fleet coordinator (algorithms/coordinator=fleet) at algorithm level: a kinematic fleet
+(simlan_data/evaluation/fleet_kinematic.py) follows the coordinator's routes under its speed
+limits, tick by tick, on small synthetic layouts and on the real layout. Fast, no simulator."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from shapely.geometry import Polygon
 
-from simlan_data.algorithms.coordinator import Intent
 from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator, build_route_graph
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.errors import ConfigError
+from simlan_data.evaluation.fleet_kinematic import KinematicFleet
 from simlan_data.world.layout import load_layout
 
 RES = 0.1
@@ -33,94 +32,12 @@ def grid_from_boxes(
     return OccupancyGrid(occ, (0.0, 0.0), RES)
 
 
-def footprint(fp: tuple[float, float, float, float], pose: tuple[float, float, float]) -> Polygon:
-    """The footprint rectangle (x0, x1, y0, y1 in base_link) at ``pose`` (x, y, yaw)."""
-    x0, x1, y0, y1 = fp
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    pts = [
-        (pose[0] + c * x - s * y, pose[1] + s * x + c * y)
-        for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
-    ]
-    return Polygon(pts)
-
-
-class Fleet:
-    """Point robots driving the coordinator's paths (Decision.path_xy) at its speed limits."""
-
-    def __init__(
-        self, grid: OccupancyGrid, robots: dict, *, stopped: tuple[str, ...] = (), dwell_s: float = 0.0
-    ):
-        self.coord = FleetCoordinator(FleetConfig(), CoordinatorContext(SAFETY_M, grid))
-        self.robots = {
-            n: {"pose": list(p), "goals": [tuple(g) for g in goals], "fp": fp, "path": None, "s": 0.0}
-            for n, (p, goals, fp) in robots.items()
-        }
-        self.stopped, self.dwell_s = set(stopped), dwell_s
-        self.t_s, self.trace, self.arrivals = 0.0, [], []  # arrivals: (t, robot, goal)
-        self._dwell: dict[str, float] = {}
-
-    def intents(self) -> list[Intent]:
-        return [
-            Intent(n, k + 1, tuple(r["pose"]), r["fp"], None, goal_xy=r["goals"][0] if r["goals"] else None)
-            for k, (n, r) in enumerate(sorted(self.robots.items()))
-        ]
-
-    def step(self, dt: float = 0.1, speed: float = 0.5) -> None:
-        decisions = self.coord.decide(round(self.t_s * 1e9), self.intents())
-        for n, r in self.robots.items():
-            d = decisions.get(n)
-            if n in self.stopped or not r["goals"] or d is None or self._dwelling(n, r):
-                continue
-            if d.path_xy is not None and (r["path"] is None or not np.array_equal(r["path"], d.path_xy)):
-                r["path"], r["s"] = d.path_xy, 0.0
-            if r["path"] is None:
-                continue
-            v = speed if d.speed_limit_mps is None else min(speed, d.speed_limit_mps)
-            cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(r["path"], axis=0), axis=1))])
-            r["s"] = min(cum[-1], r["s"] + v * dt)
-            xy = np.array([np.interp(r["s"], cum, r["path"][:, i]) for i in (0, 1)])
-            step = xy - np.asarray(r["pose"][:2])
-            yaw = float(np.arctan2(step[1], step[0])) if np.hypot(*step) > 1e-6 else r["pose"][2]
-            r["pose"] = [float(xy[0]), float(xy[1]), yaw]  # it faces where it drives
-            if r["s"] >= cum[-1] - 1e-9 and np.hypot(*(xy - r["goals"][0])) < 0.3:
-                self.arrivals.append((self.t_s, n, r["goals"][0]))
-                self._dwell[n] = self.t_s + self.dwell_s
-                r["path"] = None
-        self.trace.append({n: tuple(r["pose"]) for n, r in self.robots.items()})
-        self.t_s += dt
-
-    def _dwelling(self, n: str, r: dict) -> bool:
-        """At a goal for dwell_s (served at a dock), then on to the next goal."""
-        if n not in self._dwell:
-            return False
-        if self.t_s < self._dwell[n]:
-            return True
-        del self._dwell[n]
-        r["goals"].pop(0)
-        return not r["goals"]
-
-    def run(self, seconds: float) -> None:
-        for _ in range(round(seconds / 0.1)):
-            self.step()
-            if all(not r["goals"] or n in self.stopped for n, r in self.robots.items()):
-                return
-
-    def done(self, n: str) -> bool:
-        return not self.robots[n]["goals"]
-
-    def min_gap_m(self) -> float:
-        """The smallest distance between two robots' footprints (rectangles at their headings)."""
-        names = sorted(self.robots)
-        gaps = [
-            footprint(self.robots[a]["fp"], snap[a]).distance(footprint(self.robots[b]["fp"], snap[b]))
-            for snap in self.trace
-            for i, a in enumerate(names)
-            for b in names[i + 1 :]
-        ]
-        return float(min(gaps))
-
-    def path(self, n: str) -> np.ndarray:
-        return np.array([snap[n][:2] for snap in self.trace])
+def Fleet(  # noqa: N802 (reads as the fleet it builds)
+    grid: OccupancyGrid, robots: dict, *, stopped: tuple[str, ...] = (), dwell_s: float = 0.0
+) -> KinematicFleet:
+    """Kinematic robots driving the fleet coordinator's routes on ``grid``."""
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(SAFETY_M, grid))
+    return KinematicFleet(coordinator, robots, stopped=stopped, dwell_s=dwell_s)
 
 
 def test_head_on_in_a_single_lane_aisle_one_yields_at_a_passing_place() -> None:
@@ -135,7 +52,7 @@ def test_head_on_in_a_single_lane_aisle_one_yields_at_a_passing_place() -> None:
     assert not (in_aisle(a) & in_aisle(b)).any()  # never both in the lane
     # the one that yields leaves the lane's line at the aisle's end while the other comes through
     assert max(np.abs(a[:, 1] - 4.1).max(), np.abs(b[:, 1] - 4.1).max()) > 1.0
-    assert fleet.coord.state.deadlocks == 0
+    assert fleet.coordinator.state.deadlocks == 0
 
 
 def test_two_pallet_trucks_pass_side_by_side_in_a_wide_aisle() -> None:
@@ -152,7 +69,7 @@ def test_two_pallet_trucks_pass_side_by_side_in_a_wide_aisle() -> None:
     assert fleet.min_gap_m() >= SAFETY_M
     in_aisle = lambda p: (p[:, 0] > 7) & (p[:, 0] < 23)  # noqa: E731
     assert (in_aisle(fleet.path("a")) & in_aisle(fleet.path("b"))).any()  # they pass, nobody waits outside
-    assert fleet.coord.state.deadlocks == 0
+    assert fleet.coordinator.state.deadlocks == 0
 
 
 @pytest.mark.slow  # (the default suite stays under 10 minutes; CI runs the slow suite too)
@@ -172,7 +89,7 @@ def test_four_way_intersection_one_robot_at_a_time_and_all_arrive() -> None:
     assert fleet.min_gap_m() >= SAFETY_M
     inside = np.array([[np.hypot(p[0] - 12, p[1] - 12) < 1.2 for p in snap.values()] for snap in fleet.trace])
     assert inside.sum(axis=1).max() == 1  # the intersection held by one robot at a time
-    assert fleet.coord.state.deadlocks == 0
+    assert fleet.coordinator.state.deadlocks == 0
 
 
 def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
@@ -187,6 +104,22 @@ def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
     assert fleet.done("a")
     assert fleet.path("a")[:, 1].max() > 6.8  # it took the upper aisle
     assert fleet.min_gap_m() >= SAFETY_M
+
+
+def test_idle_robot_in_a_single_lane_moves_aside_and_comes_back() -> None:
+    # an idle robot (no goal) parked in the middle of a single-lane aisle stands in the only way:
+    # the coordinator moves it out of the aisle, the other passes, then it returns to where it parked
+    grid = grid_from_boxes((24, 8), [(5, 0, 19, 3), (5, 5.2, 19, 8)])
+    fleet = Fleet(grid, {"a": ((2, 4, 0.0), [(22.5, 4)], JACKAL), "p": ((12, 4.1, 0.0), [], JACKAL)})
+    fleet.run(200)
+    assert fleet.done("a")
+    for _ in range(600):  # then it goes back
+        fleet.step()
+    assert fleet.min_gap_m() >= SAFETY_M
+    p = fleet.path("p")
+    assert (np.abs(p[:, 0] - 12) > 7).any()  # it left the aisle (x 5..19)
+    assert np.hypot(*(p[-1] - (12, 4.1))) < 0.5  # and parked again where it stood
+    assert fleet.coordinator.state.failures == {}
 
 
 @pytest.mark.slow  # (the default suite stays under 10 minutes; CI runs the slow suite too)
@@ -221,7 +154,7 @@ def test_unreachable_goal_is_reported_and_others_are_unaffected() -> None:
     }
     fleet = Fleet(grid, robots)
     fleet.run(150)
-    assert fleet.coord.state.failures == {"u": "unreachable"}
+    assert fleet.coordinator.state.failures == {"u": "unreachable"}
     assert fleet.done("a") and fleet.done("c")
     assert not fleet.done("u")
     assert fleet.min_gap_m() >= SAFETY_M

@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from conftest import compose_config
-from simlan_data.algorithms.coordinator import Coordinator, Intent
+from simlan_data.algorithms.coordinator import Coordinator, Decision, Intent
 from simlan_data.algorithms.dryrun import dry_run
 from simlan_data.algorithms.follower import PathFollower, PursuitParams
+from simlan_data.algorithms.navigation import Navigator
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_nav2_map
 from simlan_data.algorithms.planner import GridPlanner, PlanningError
 from simlan_data.algorithms.stack import AgentPlan, NavigationParams
@@ -170,3 +171,17 @@ def test_simlan_nav2_map_loads_and_plans_the_main_aisle() -> None:
     assert grid.occupied.mean() < 0.9
     plan = GridPlanner(grid, radius_m=0.8).plan((-10.0, 0.4), (20.0, 0.4))
     assert plan.length_m < 32.0
+
+
+def test_a_navigator_with_every_goal_done_drives_only_the_way_aside_it_is_given() -> None:
+    grid = _room_with_wall()
+    nav = Navigator("robot_agent_1", [], GridPlanner(grid, radius_m=0.4), PursuitParams(max_speed_mps=1.0))
+    x, y, yaw, dt = 1.5, 1.5, 0.0, 0.05
+    assert nav.step((x, y, yaw), dt) == (0.0, 0.0)  # done: it stands
+    nav.move_aside(np.array([[1.5, 1.5], [3.5, 1.5]]))  # a fleet coordinator moves it out of the way
+    for _ in range(int(10 / dt)):
+        v, w = nav.step((x, y, yaw), dt, Decision(None))
+        x, y, yaw = x + v * np.cos(yaw) * dt, y + v * np.sin(yaw) * dt, yaw + w * dt
+    assert np.hypot(x - 3.5, y - 1.5) < 0.3
+    assert nav.status.state == "done" and nav.status.goals_reached == 0  # no goal counted
+    assert nav.step((x, y, yaw), dt, Decision(0.0)) == (0.0, 0.0)

@@ -87,6 +87,7 @@ class Navigator:
         self._pose: tuple[float, float] | None = None  # the newest estimated position given
         self._anchor: tuple[float, float] | None = None  # where progress was last seen ...
         self._progress_ns: int | None = None  # ... and when (None: not yet clocked on this goal)
+        self.aside: PathFollower | None = None  # with every goal done: a way out of others' way
 
     @property
     def goal(self) -> NDArray[np.float64] | None:
@@ -139,6 +140,13 @@ class Navigator:
             self.status.planned_length_m += plan.length_m
             self._goal_first_plan = False
         self.new_plan = True
+
+    def move_aside(self, path_xy: NDArray[np.float64]) -> None:
+        """With every goal done, drive ``path_xy`` (a fleet coordinator moves an idle robot out of
+        the others' way); it counts as no goal. A path equal to the one driven is kept."""
+        if self.goal is not None or (self.aside is not None and np.array_equal(self.aside.path, path_xy)):
+            return
+        self.aside = PathFollower(path_xy, self.pursuit)
 
     def cancel(self) -> None:
         """Drop the current plan: the safety layer stopped the robot. The goal stays; a new plan
@@ -217,7 +225,7 @@ class Navigator:
         """Twist for the next ``dt_s`` given the estimated pose (None: no valid estimate)."""
         if self.goal is None:
             self.status.state = "done"
-            return 0.0, 0.0
+            return self._step_aside(pose_xyyaw, dt_s, decision)
         if pose_xyyaw is None:
             self.status.state = "waiting_localization"
             return 0.0, 0.0
@@ -237,3 +245,13 @@ class Navigator:
             if self.goal is None:
                 self.status.state = "done"
         return v, w
+
+    def _step_aside(
+        self, pose_xyyaw: tuple[float, float, float] | None, dt_s: float, decision: Decision | None
+    ) -> tuple[float, float]:
+        """Done: stand, or follow the way aside the coordinator gave, at its speed limit."""
+        if self.aside is None or self.aside.done or pose_xyyaw is None:
+            return 0.0, 0.0
+        limit = None if decision is None else decision.speed_limit_mps
+        x, y, yaw = pose_xyyaw
+        return self.aside.step(x, y, yaw, dt_s, speed_limit_mps=limit)

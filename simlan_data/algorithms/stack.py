@@ -443,7 +443,10 @@ class GpssStack:
     @staticmethod
     def _follow_route(nav: Navigator, path_xy: NDArray[np.float64]) -> None:
         """Follow the coordinator's route (a fleet plan) unless it is the path followed already."""
-        if nav.goal is None or (nav.plan is not None and np.array_equal(nav.plan.points_xy, path_xy)):
+        if nav.goal is None:  # every goal done: the coordinator moves it out of the others' way
+            nav.move_aside(path_xy)
+            return
+        if nav.plan is not None and np.array_equal(nav.plan.points_xy, path_xy):
             return
         length = float(np.sum(np.linalg.norm(np.diff(path_xy, axis=0), axis=1)))
         nav.adopt(Plan(path_xy, length, 0))

@@ -14,7 +14,7 @@ speed limit that stops it before the first vertex it may not enter yet.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
 import numpy as np
@@ -32,6 +32,7 @@ from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError
 
 MOVED_M = 0.05  # less than this in stall_s: not moving
+IDLE_PRIORITY = 10**9  # idle robots are planned after every robot with a goal
 
 
 def reach_of(footprint_m: tuple[float, float, float, float]) -> float:
@@ -45,6 +46,7 @@ class _Robot:
     """What the coordinator remembers of one robot between ticks."""
 
     goal: tuple[float, float] | None = None
+    park: tuple[float, float] | None = None  # idle (every goal done): where it stands when not in the way
     path_xy: NDArray[np.float64] | None = None
     moved_at_ns: int = 0
     moved_from: tuple[float, float] = (0.0, 0.0)
@@ -90,12 +92,26 @@ class FleetCoordinator:
 
     # ------------------------------------------------------------------ the role's method
     def decide(self, t_ns: int, intents: list[Intent]) -> dict[str, Decision]:
+        # robots with a goal, then idle robots (every goal done): planned last, they stay where they
+        # are unless they stand in someone's way, then they move aside (and come back later)
         movers = [i for i in intents if i.yields and i.goal_xy is not None]
+        movers += [self._idle(t_ns, i) for i in intents if i.yields and i.goal_xy is None]
         graph = self._graph(intents)
         self._observe(t_ns, movers)
         if self._must_replan(t_ns, movers):
-            self._replan(t_ns, graph, movers, [i for i in intents if i not in movers])
+            names = {i.namespace for i in movers}
+            self._replan(t_ns, graph, movers, [i for i in intents if i.namespace not in names])
         return self._decisions(t_ns, graph, movers)
+
+    def _idle(self, t_ns: int, intent: Intent) -> Intent:
+        """An idle robot as a mover of the lowest priority whose goal is its parking place (where it
+        became idle)."""
+        r = self._robots.setdefault(
+            intent.namespace, _Robot(moved_at_ns=t_ns, moved_from=intent.pose_xyyaw[:2])
+        )
+        if r.park is None:
+            r.park = (float(intent.pose_xyyaw[0]), float(intent.pose_xyyaw[1]))
+        return replace(intent, goal_xy=r.park, priority=IDLE_PRIORITY + intent.priority)
 
     # ------------------------------------------------------------------ steps
     def _graph(self, intents: list[Intent]) -> RouteGraph:
@@ -163,6 +179,8 @@ class FleetCoordinator:
         for i in sorted(movers, key=lambda i: (i.priority, i.namespace)):
             r = self._robots[i.namespace]
             r.goal = i.goal_xy
+            if i.priority < IDLE_PRIORITY:
+                r.park = None  # a goal again: it parks where it ends up next
             if r.stopped_since_ns is not None and r.stopped_since_ns < t_ns:
                 obstacles.append(self._obstacle(i))
                 continue  # until it moves again (on its own navigator's plan): then it rejoins
@@ -183,6 +201,7 @@ class FleetCoordinator:
                     i.pose_xyyaw[2],
                     goal_xy=i.goal_xy,
                     start_turnable=self._clearance_at(xy) >= shape.reach_m,
+                    idle=i.priority >= IDLE_PRIORITY,
                 )
             )
         timing = Timing(self.config.spacing_m, self.config.horizon_steps, self.safety_m)
@@ -232,6 +251,9 @@ class FleetCoordinator:
             if route is None or r.path_xy is None or ns in self.state.plan.failures:
                 out[ns] = Decision(0.0)  # off the graph or failed: stands for the others
                 continue
+            if i.priority >= IDLE_PRIORITY and len(route.nodes) == 1 and self._at(i, r.park):
+                out[ns] = Decision(0.0)  # idle where it parks: it stands
+                continue
             last, holders = frontier(self.state.routes, ns)
             plan = self.state.plan.plans[ns]
             free_to_goal = last == len(route.nodes) - 1 and plan.complete and not plan.queued
@@ -246,6 +268,11 @@ class FleetCoordinator:
             out[ns] = Decision(limit, tuple(holders) if limit == 0.0 else (), path_xy=r.path_xy)
         self._check_deadlock(t_ns, waits)
         return out
+
+    def _at(self, intent: Intent, xy: tuple[float, float] | None) -> bool:
+        return xy is not None and bool(
+            np.hypot(intent.pose_xyyaw[0] - xy[0], intent.pose_xyyaw[1] - xy[1]) <= self.config.reach_m
+        )
 
     def _limit(self, graph: RouteGraph, route: Route, intent: Intent, last: int) -> float | None:
         """Speed limit that stops the robot on vertex ``last`` (the last one it may enter)."""

@@ -1,0 +1,124 @@
+"""Benchmark: the fleet coordinator alone over seeded missions, kinematic robots (issue 23).
+
+    python benchmarks/fleet_kinematic.py [--robots 4,8,12] [--seeds 100] [--tasks 3]
+                                         [--limit-s 900] [--jobs 2] [--json FILE]
+
+For every fleet size and seed: the missions of ``scenario=fleet`` (simlan_data/config/missions.py,
+the same generator and seed as the run), the real layout's occupancy grid, and
+``algorithms/coordinator=fleet`` driving a kinematic fleet (simlan_data/evaluation/fleet_kinematic.py:
+robots follow the coordinator's routes exactly at their mission speed, no physics, no cameras,
+ground-truth poses). Counts goals reached, missions done, deadlocks (the coordinator's), failures,
+the smallest footprint-to-footprint gap, makespan, tasks per hour and the planning time. This
+measures the coordination itself; the closed loop in the simulator is the sweep in docs/fleet.md.
+Writes JSON with a ``figures`` list for benchmarks/summary.py.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine
+from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator
+from simlan_data.algorithms.occupancy import grid_from_world
+from simlan_data.algorithms.roles import CoordinatorContext
+from simlan_data.config.missions import MissionsConfig, generate_missions
+from simlan_data.evaluation.fleet_kinematic import KinematicFleet
+from simlan_data.world.agent_types import AGENT_TYPES
+from simlan_data.world.layout import load_layout
+
+SAFETY_M = 0.6  # navigation.safety_distance_m's default
+DWELL_S = 2.0  # at each goal (a pickup, a drop-off, a charge)
+
+
+def one(robots: int, seed: int, tasks: int, limit_s: float) -> dict:
+    """One seeded mission set to the end (or ``limit_s``)."""
+    missions = generate_missions(MissionsConfig(robots=robots, tasks=tasks), seed=seed)
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(SAFETY_M, grid))
+    spec = {
+        n: (
+            tuple(a["pose"]),
+            [tuple(g) for g in a["goals"]],
+            AGENT_TYPES[a["type"]].footprint_m,
+            a["speed_mps"],
+        )
+        for n, a in missions.agents.items()
+    }
+    goals = sum(len(a["goals"]) for a in missions.agents.values())
+    fleet = KinematicFleet(coordinator, spec, dwell_s=DWELL_S)
+    t0 = time.perf_counter()
+    fleet.run(limit_s)
+    wall = time.perf_counter() - t0
+    reached = goals - fleet.goals_left()
+    state = coordinator.state
+    tasks_done = sum(
+        min(tasks, sum(1 for (_, n, _) in fleet.arrivals if n == name) // 2) for name in missions.agents
+    )
+    return {
+        "robots": robots, "seed": seed, "goals": goals, "reached": reached,
+        "missions_done": fleet.goals_left() == 0, "deadlocks": state.deadlocks,
+        "failures": dict(state.failures), "min_gap_m": round(fleet.min_gap_m(every=5), 3),
+        "makespan_s": round(fleet.t_s, 1), "tasks_per_hour": round(3600 * tasks_done / max(fleet.t_s, 1e-9), 1),
+        "replans": state.replans, "wall_s": round(wall, 2),
+    }  # fmt: skip
+
+
+def summary(rows: list[dict]) -> dict[int, dict]:
+    out: dict[int, dict] = {}
+    for n in sorted({r["robots"] for r in rows}):
+        rs = [r for r in rows if r["robots"] == n]
+        out[n] = {
+            "runs": len(rs), "missions_done": sum(r["missions_done"] for r in rs),
+            "goals_reached": f"{sum(r['reached'] for r in rs)}/{sum(r['goals'] for r in rs)}",
+            "deadlocks": sum(r["deadlocks"] for r in rs), "min_gap_m": min(r["min_gap_m"] for r in rs),
+            "tasks_per_hour_mean": round(float(np.mean([r["tasks_per_hour"] for r in rs])), 1),
+            "makespan_s_mean": round(float(np.mean([r["makespan_s"] for r in rs])), 1),
+            "wall_s_per_run": round(float(np.mean([r["wall_s"] for r in rs])), 2),
+        }  # fmt: skip
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--robots", default="4,8,12")
+    ap.add_argument("--seeds", type=int, default=100)
+    ap.add_argument("--tasks", type=int, default=3)
+    ap.add_argument("--limit-s", type=float, default=900.0)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    cases = [(int(n), s) for n in args.robots.split(",") for s in range(args.seeds)]
+    rows = []
+    with ProcessPoolExecutor(args.jobs) as pool:
+        futures = [pool.submit(one, n, s, args.tasks, args.limit_s) for n, s in cases]
+        for f in futures:
+            r = f.result()
+            rows.append(r)
+            print(json.dumps(r), flush=True)
+    table = summary(rows)
+    for n, row in table.items():
+        print(n, row, flush=True)
+    result = {
+        "command": f"python benchmarks/fleet_kinematic.py --robots {args.robots} --seeds {args.seeds}"
+        f" --tasks {args.tasks} --json FILE",
+        "machine": machine(),
+        "date": datetime.date.today().isoformat(),
+        "history": "docs/benchmarks/fleet.md",
+        "summary": table,
+        "rows": rows,
+    }
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
