@@ -70,6 +70,20 @@ def test_every_typed_node_refuses_forced_keys(overrides: list[str], match: str) 
         compose_config(["cameras=single", *overrides])
 
 
+@pytest.mark.parametrize(
+    ("override", "match"),
+    [
+        ("posemap.hidden=[[]]", r"invalid posemap.hidden=\[\[\]\] in config: need at least one layer"),
+        ("posemap.position=[[],1,2]", r"invalid posemap.position=.* expected \[x_m, y_m, yaw_rad\]"),
+    ],
+)
+def test_nested_lists_where_numbers_belong_are_refused(override: str, match: str) -> None:
+    """Found by the fuzzer: OmegaConf let ``[[]]`` into a list[int] field; the check then failed
+    with a TypeError ('<=' between list and int) instead of naming the key."""
+    with pytest.raises(ConfigError, match=match):
+        compose_config(["cameras=single", override])
+
+
 def test_open_nodes_stay_open() -> None:
     """Hydra's own keys are Hydra's business; the packaged groups all compose."""
     compose_config(["cameras=single", "+hydra.job.env_set.FOO=1"])

@@ -110,11 +110,13 @@ class PosemapConfig:
         for key in ("noise_px", "hidden_noise_px"):
             if not 0 <= getattr(self, key) <= 100:
                 raise _bad(key, getattr(self, key), "must be within 0..100 px", "use e.g. 1.0")
-        if len(self.position) != 3:
+        if len(self.position) != 3 or not all(_is_number(v) for v in self.position):
             raise _bad(
                 "position", list(self.position), "expected [x_m, y_m, yaw_rad]", "use [5.3, -10.0, 0.0]"
             )
-        if any(h <= 0 for h in self.hidden_layers) or not self.hidden_layers:
+        # (every element checked for its type too: OmegaConf lets `posemap.hidden=[[]]` through)
+        hidden = self.hidden_layers if _is_int(self.width) else list(self.hidden)
+        if not hidden or not all(_is_int(h) and h > 0 for h in hidden):
             raise _bad(
                 "hidden", list(self.hidden), "need at least one layer, every width > 0", "use [504, 476, 479]"
             )
@@ -187,3 +189,11 @@ class TrainedMapperParams:
             raise ConfigError.invalid(
                 key + "refine_starts", self.refine_starts, "must be within 1..100", "use 8"
             )
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
