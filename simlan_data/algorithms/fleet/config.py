@@ -26,7 +26,7 @@ class FleetConfig:
     spacing_m: float = 1.0  # route graph block size: node spacing on open floor, one plan step of travel
     lane_clearance_m: float = 0.25  # a lane keeps the widest robot's half width plus this from obstacles
     speed_mps: float = 0.5  # planning speed (a step lasts spacing_m / speed_mps)
-    horizon_s: float = 240.0  # reservation horizon: how far ahead plans are reserved
+    horizon_s: float = 90.0  # reservation horizon: how far ahead plans are reserved
     safety_m: float = (
         0.0  # extra distance between two robots' footprint regions (on top of the run's safety distance)
     )
@@ -41,7 +41,7 @@ class FleetConfig:
         _within("spacing_m", self.spacing_m, 0.2, 5.0, "m", 1.0)
         _within("lane_clearance_m", self.lane_clearance_m, 0.0, 2.0, "m", 0.25, zero_ok=True)
         _within("speed_mps", self.speed_mps, 0.0, 5.0, "m/s", 0.5)
-        _within("horizon_s", self.horizon_s, 0.0, 1800.0, "s", 240.0)
+        _within("horizon_s", self.horizon_s, 0.0, 1800.0, "s", 90.0)
         _within("safety_m", self.safety_m, 0.0, 5.0, "m", 0.0, zero_ok=True)
         _within("tracking_m", self.tracking_m, 0.0, 2.0, "m", 0.15, zero_ok=True)
         _within("reach_m", self.reach_m, 0.0, 2.0, "m", 0.35)

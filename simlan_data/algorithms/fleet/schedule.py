@@ -43,6 +43,7 @@ START = -1  # ``prev`` of the start state: the robot stands at its real pose
 FROM_START = -2  # ``prev`` of the first vertex after it: the edge starts at the real pose
 PENALTY_M = 1000.0  # the search's guide avoids nodes held to the horizon at this extra cost
 MAX_EXPANSIONS = 40_000  # a search that expands more states than this gives up (reported blocked)
+QUEUE_EXPANSIONS = 4_000  # the same for a search to a queue node (near; up to 12 are tried)
 
 
 @dataclass(frozen=True)
@@ -282,7 +283,7 @@ def _blocking(
     would cross if they were not there (none when it cannot reach its goal even then)."""
     table.set_waiting({})
     try:
-        free = _plan_one(graph, r, table, timing)
+        free = _plan_one(graph, r, table, timing, queue=False)  # (one search: the goal, no queue)
     finally:
         table.set_waiting(waiting)
     if free is None or not free.complete or free.queued:
@@ -301,8 +302,10 @@ def _clear_steps(r: Request, timing: Timing) -> int:
     return 1 + timing.steps(r.shape.front_m - r.shape.back_m + timing.safety_m)
 
 
-def _plan_one(graph: RouteGraph, r: Request, table: Reservations, timing: Timing) -> RobotPlan | None:
-    """Space-time A* to the goal, or to a queue node outside it when the goal is held."""
+def _plan_one(
+    graph: RouteGraph, r: Request, table: Reservations, timing: Timing, *, queue: bool = True
+) -> RobotPlan | None:
+    """Space-time A* to the goal, or (``queue``) to a queue node outside it when the goal is held."""
     assert r.goal is not None
     search = _Search(graph, r, table, timing)
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
@@ -314,8 +317,10 @@ def _plan_one(graph: RouteGraph, r: Request, table: Reservations, timing: Timing
         dist = graph.distances_to(r.goal)
     if not search.held_at(r.goal, timing.horizon):  # free at the horizon: go there
         plan = search.run(r.goal, dist, tail=r.goal_xy)
-        if plan is not None:
+        if plan is not None or not queue:
             return plan
+    if not queue:
+        return None
     # held to the end of the horizon (a dock in use): the nearest node that stays free from the
     # second half of the horizon on, twice the conflict distance from the goal (the robot served
     # leaves past the queue)
@@ -328,7 +333,7 @@ def _plan_one(graph: RouteGraph, r: Request, table: Reservations, timing: Timing
         if any(search.held_at(int(node), k) for k in range(timing.horizon // 2, timing.horizon + 1)):
             continue
         tried += 1
-        plan = search.run(int(node), graph.distances_to(int(node)), tail=None)
+        plan = search.run(int(node), graph.distances_to(int(node)), tail=None, budget=QUEUE_EXPANSIONS)
         if plan is not None and plan.vertices[-1].node == node:
             plan.queued = True
             return plan
@@ -444,7 +449,12 @@ class _Search:
 
     # ------------------------------------------------------------------ search
     def run(
-        self, target: int, dist: NDArray[np.float64], *, tail: tuple[float, float] | None
+        self,
+        target: int,
+        dist: NDArray[np.float64],
+        *,
+        tail: tuple[float, float] | None,
+        budget: int = MAX_EXPANSIONS,
     ) -> RobotPlan | None:
         """Earliest arrival at ``target`` that it can then hold; else the plan that ends nearest to it
         at the horizon (a windowed plan); None if it cannot even keep clear until the horizon."""
@@ -465,7 +475,7 @@ class _Search:
             parent[s] = None
             heapq.heappush(heap, (h[r.start], tie := tie + 1, s))
         expanded = 0
-        while heap and expanded < MAX_EXPANSIONS:
+        while heap and expanded < budget:
             _, _, state = heapq.heappop(heap)
             expanded += 1
             u, k, prev, turn = state
