@@ -15,23 +15,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from shapely.geometry import Polygon
 
 from simlan_data.algorithms.coordinator import Intent
+from simlan_data.algorithms.safety.geometry import Footprint, footprint_polygon
 from simlan_data.constants import NS_PER_S
-
-Footprint = tuple[float, float, float, float]
-
-
-def footprint_polygon(fp: Footprint, pose: tuple[float, float, float]) -> Polygon:
-    """The footprint rectangle (x0, x1, y0, y1 in base_link) at ``pose`` (x, y, yaw)."""
-    x0, x1, y0, y1 = fp
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    pts = [
-        (pose[0] + c * x - s * y, pose[1] + s * x + c * y)
-        for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
-    ]
-    return Polygon(pts)
 
 
 @dataclass
@@ -140,7 +127,7 @@ class KinematicFleet:
         """The smallest distance between two robots' footprints over the run (every n-th tick)."""
         names = sorted(self._r)
         gaps = [
-            footprint_polygon(self._r[a].fp, snap[a]).distance(footprint_polygon(self._r[b].fp, snap[b]))
+            footprint_polygon(snap[a], self._r[a].fp).distance(footprint_polygon(snap[b], self._r[b].fp))
             for snap in self.trace[::every]
             for i, a in enumerate(names)
             for b in names[i + 1 :]

@@ -60,10 +60,6 @@ class Request:
     start_turnable: bool = True  # it may turn in place where it stands
     idle: bool = False  # every goal done: its goal is where it parks; it moves aside, never goes first
 
-    @property
-    def radius_m(self) -> float:
-        return self.shape.reach_m
-
 
 @dataclass(frozen=True)
 class Obstacle:
@@ -288,11 +284,10 @@ def _blocking(
         table.set_waiting(waiting)
     if free is None or not free.complete or free.queued:
         return []
-    idle = {n for n, w in waiting.items() if w[2]}
     return [
         n
-        for n, (standing, _, _) in waiting.items()
-        if n not in idle
+        for n, (standing, _, idle) in waiting.items()
+        if not idle
         and any(fp.conflict(v.occ, standing, 0.0 if v.loose else timing.safety_m) for v in free.vertices)
     ]
 
@@ -310,14 +305,13 @@ def _plan_one(
     search = _Search(graph, r, table, timing)
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
     # obstacles), so a detour round a lane that stays blocked is found without searching the lane
-    dist = graph.distances_to(
-        r.goal, avoid=table.blocked_nodes(timing.horizon, r.shape.half_width_m), penalty_m=PENALTY_M
-    )
+    held_late = table.blocked_nodes(timing.horizon, r.shape.half_width_m)
+    dist = graph.distances_to(r.goal, avoid=held_late, penalty_m=PENALTY_M)
     if not dist[r.start] < PENALTY_M:  # every way passes something held later: pass it before
         dist = graph.distances_to(r.goal)
-    if not search.held_at(r.goal, timing.horizon):  # free at the horizon: go there
+    if not held_late[r.goal]:  # free at the horizon: go there
         plan = search.run(r.goal, dist, tail=r.goal_xy)
-        if plan is not None or not queue:
+        if plan is not None:
             return plan
     if not queue:
         return None
@@ -363,7 +357,6 @@ class _Search:
         self._free: dict[tuple, bool] = {}
         self._regions: dict[tuple, Region] = {}
         self.pieces = table.conflicts.pieces(r.shape)  # shared: every directed edge, every turn
-        self.n_arcs = self.pieces.n_arcs
         self.tail: tuple[float, float] | None = None
         self.target = -1
 
@@ -396,7 +389,7 @@ class _Search:
         else:
             units.append(self.graph.arc_index[(prev, node)])
         if turn:
-            units.append(self.n_arcs + node)
+            units.append(self.pieces.n_arcs + node)
         if node == self.target and self.tail is not None:
             specials.append(("tail", node, self.tail))
         return units, specials

@@ -115,7 +115,7 @@ class PosemapConfig:
                 "position", list(self.position), "expected [x_m, y_m, yaw_rad]", "use [5.3, -10.0, 0.0]"
             )
         # (every element checked for its type too: OmegaConf lets `posemap.hidden=[[]]` through)
-        hidden = self.hidden_layers if _is_int(self.width) else list(self.hidden)
+        hidden = self.hidden_layers
         if not hidden or not all(_is_int(h) and h > 0 for h in hidden):
             raise _bad(
                 "hidden", list(self.hidden), "need at least one layer, every width > 0", "use [504, 476, 479]"
