@@ -77,6 +77,8 @@ class ConflictCache:
         self._pieces: dict[Shape, Pieces] = {}
         self._planned: dict[tuple[Shape, int], tuple[NDArray[np.bool_], int]] = {}
         self._waiting: dict[tuple[Shape, str], NDArray[np.bool_]] = {}
+        # a plan reserves the same region object at every step it holds it: measured once
+        self._hits: dict[tuple[Shape, int], tuple[Region, NDArray[np.bool_]]] = {}
 
     def pieces(self, shape: Shape) -> Pieces:
         if shape not in self._pieces:
@@ -92,10 +94,16 @@ class ConflictCache:
         pieces = self.pieces(shape)
         bad, folded = self._planned.get((shape, step), (np.zeros(len(pieces.r), dtype=bool), 0))
         for region in parts[folded:]:
-            bad = bad | pieces.hit_by(region, self.table.safety_m)
+            bad = bad | self._hit(shape, pieces, region)
         self._planned[(shape, step)] = (bad, len(parts))
         for name, region in waiting:
             if (shape, name) not in self._waiting:
                 self._waiting[(shape, name)] = pieces.hit_by(region, self.table.safety_m)
             bad = bad | self._waiting[(shape, name)]
         return bad
+
+    def _hit(self, shape: Shape, pieces: Pieces, region: Region) -> NDArray[np.bool_]:
+        key = (shape, id(region))
+        if key not in self._hits:  # (the region is kept with its answer: its id stays its own)
+            self._hits[key] = (region, pieces.hit_by(region, self.table.safety_m))
+        return self._hits[key][1]

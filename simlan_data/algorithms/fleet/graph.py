@@ -73,6 +73,23 @@ class RouteGraph:
         return {(u, v): k for k, (u, v) in enumerate(self.arcs.tolist())}
 
     @cached_property
+    def arc_geometry(self) -> list[list[tuple[int, float, float]]]:
+        """Per node: (neighbour, length, direction angle) of each edge leaving it (plain floats: the
+        space-time search reads these millions of times)."""
+        out: list[list[tuple[int, float, float]]] = []
+        for u, vs in enumerate(self.neighbours):
+            d = self.xy[vs] - self.xy[u] if vs else np.zeros((0, 2))
+            lengths = np.hypot(d[:, 0], d[:, 1]).tolist()
+            angles = np.arctan2(d[:, 1], d[:, 0]).tolist()
+            out.append(list(zip(vs, lengths, angles, strict=True)))
+        return out
+
+    @cached_property
+    def arc_angle(self) -> dict[tuple[int, int], float]:
+        """(u, v) -> direction angle of the edge from u to v."""
+        return {(u, v): a for u, arcs in enumerate(self.arc_geometry) for v, _, a in arcs}
+
+    @cached_property
     def components(self) -> NDArray[np.int32]:
         """Connected-component label of every node."""
         return connected_components(self.matrix, directed=False)[1]

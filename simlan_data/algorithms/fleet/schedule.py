@@ -126,7 +126,7 @@ class Timing:
     turn_tolerance_rad: float = math.radians(50.0)  # larger heading changes need a turn in place
 
     def steps(self, length_m: float) -> int:
-        return max(1, int(np.ceil(length_m / self.spacing_m - 1e-6)))
+        return max(1, math.ceil(length_m / self.spacing_m - 1e-6))
 
 
 class Reservations:
@@ -361,14 +361,12 @@ class _Search:
         self.target = -1
 
     # ------------------------------------------------------------------ geometry
-    def pos(self, node: int, prev: int) -> NDArray[np.float64]:
-        return self.start_xy if prev == START else self.graph.xy[node]
-
     def heading(self, node: int, prev: int) -> float | None:
         if prev == START:
             return self.r.heading_rad
-        a = self.start_xy if prev == FROM_START else self.graph.xy[prev]
-        d = self.graph.xy[node] - a
+        if prev >= 0:
+            return self.graph.arc_angle[(prev, node)]
+        d = self.graph.xy[node] - self.start_xy
         return float(np.arctan2(d[1], d[0])) if np.hypot(*d) > 1e-9 else None
 
     def occ(self, node: int, prev: int, turn: bool) -> Region:
@@ -497,22 +495,33 @@ class _Search:
         u, k, prev, turn = state
         horizon = self.timing.horizon
         out: list[State] = [(u, min(k + 1, horizon), prev, turn)]
-        here, heading = self.pos(u, prev), self.heading(u, prev)
+        heading = self.heading(u, prev)
+        came = FROM_START if prev == START else u
+        tolerance, steps, turnable = self.timing.turn_tolerance_rad, self.timing.steps, self.turnable
+        for v, length, angle in self._arcs(u, prev):
+            if heading is not None and not turn and length > 1e-9:
+                off = abs((angle - heading + math.pi) % (2 * math.pi) - math.pi)
+                if off > tolerance:
+                    continue  # would have to turn in place here, which this state does not
+            k2 = min(k + steps(length), horizon)
+            out.append((v, k2, came, False))
+            if turnable[v]:
+                out.append((v, k2, came, True))
+        return out
+
+    def _arcs(self, u: int, prev: int) -> list[tuple[int, float, float]]:
+        """(neighbour, length, angle) of each move from ``u``; from the real start pose they are
+        measured from there, and the start node itself is one of them."""
+        if prev != START:
+            return self.graph.arc_geometry[u]
+        here = self.start_xy
         targets = list(self.graph.neighbours[u])
-        if prev == START and float(np.linalg.norm(here - self.graph.xy[u])) > 0.05:
+        if float(np.linalg.norm(here - self.graph.xy[u])) > 0.05:
             targets.append(u)
+        out = []
         for v in targets:
             d = self.graph.xy[v] - here
-            length = float(np.hypot(*d))
-            if heading is not None and not turn and length > 1e-9:
-                off = abs((np.arctan2(d[1], d[0]) - heading + np.pi) % (2 * np.pi) - np.pi)
-                if off > self.timing.turn_tolerance_rad:
-                    continue  # would have to turn in place here, which this state does not
-            k2 = min(k + self.timing.steps(length), horizon)
-            came = FROM_START if prev == START else u
-            out.append((v, k2, came, False))
-            if self.turnable[v]:
-                out.append((v, k2, came, True))
+            out.append((v, float(np.hypot(*d)), float(np.arctan2(d[1], d[0]))))
         return out
 
     def _plan(self, parent: dict[State, State | None], state: State, *, complete: bool) -> RobotPlan:
