@@ -35,7 +35,7 @@ class FleetConfig:
     brake_m: float = 1.0  # below this distance to the last vertex it may enter, the speed limit tapers
     stall_s: float = 3.0  # allowed to move but not moving for this long: stopped (an obstacle, replan)
     deadlock_after_s: float = 10.0  # deadlock bound: a robot waiting this long on a robot that does not move
-    replan_s: float = 5.0  # replan this often while a plan is windowed or a robot queues or is stopped
+    replan_s: float = 5.0  # least time between replans for a spent window, a queue, a stop, a failure
 
     def __post_init__(self) -> None:
         _within("spacing_m", self.spacing_m, 0.2, 5.0, "m", 1.0)

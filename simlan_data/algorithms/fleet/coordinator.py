@@ -166,10 +166,21 @@ class FleetCoordinator:
                 return True  # stopped since the plan: plan around it
         pending = (
             bool(self.state.plan.failures)
-            or any(not p.complete or p.queued for p in self.state.plan.plans.values())
             or any(r.stopped_since_ns is not None for r in self._robots.values())
+            or self._window_spent()
         )
         return pending and t_ns - self.state.planned_at_ns >= self.config.replan_s * NS_PER_S
+
+    def _window_spent(self) -> bool:
+        """Whether a robot with a windowed or queued plan has driven half of it: time to plan the
+        next window (rolling horizon). Replanning sooner changes where windows end while the robots
+        drive them, and robots then turn back and forth between two ways round."""
+        for name, plan in self.state.plan.plans.items():
+            route = self.state.routes.get(name)
+            if route is not None and (not plan.complete or plan.queued):
+                if 2 * route.progress >= len(route.nodes) - 1:
+                    return True
+        return False
 
     def _replan(self, t_ns: int, graph: RouteGraph, movers: list[Intent], others: list[Intent]) -> None:
         """Plan every moving robot from where it is (stopped ones and the others are obstacles)."""

@@ -135,6 +135,9 @@ class Reservations:
     def __init__(self, graph: RouteGraph, horizon: int, safety_m: float) -> None:
         self.graph, self.horizon, self.safety_m = graph, horizon, safety_m
         self.parts: list[list[Region]] = [[] for _ in range(horizon + 1)]
+        # what stays where it is after the horizon too: obstacles, robots standing, robots at their
+        # goal (not the ends of windowed plans: those robots drive on in the next window)
+        self.staying: list[Region] = []
         self._merged: dict[int, Region] = {}
         # robots not planned yet: where they stand, and until which step (the time they need to
         # get out of the way; after it, a robot planned earlier may take the place and the later one
@@ -153,10 +156,14 @@ class Reservations:
     def add_static(self, region: Region) -> None:
         for k in range(self.horizon + 1):
             self.add(k, region)
+        self.staying.append(region)
 
-    def add_plan(self, plan: RobotPlan) -> None:
-        """Reserve what the robot holds at every step; after its plan it stays on its last vertex."""
+    def add_plan(self, plan: RobotPlan, *, stays: bool) -> None:
+        """Reserve what the robot holds at every step; after its plan it stays on its last vertex
+        (``stays``: beyond the horizon too)."""
         vs = plan.vertices
+        if stays:
+            self.staying.append(vs[-1].occ)
         for m, v in enumerate(vs):
             acquire = 0 if m == 0 else (vs[m - 1].depart or 0) + 1
             release = vs[m + 1].arrive if m + 1 < len(vs) else self.horizon
@@ -171,9 +178,13 @@ class Reservations:
             self._merged[step] = fp.region(*parts)
         return self._merged[step]
 
-    def blocked_nodes(self, step: int, radius_m: float) -> NDArray[np.bool_]:
-        """Nodes where a disc of ``radius_m`` conflicts with what is held at ``step``."""
-        held = self.at(step)
+    def blocked_nodes(self, step: int | None, radius_m: float) -> NDArray[np.bool_]:
+        """Nodes where a disc of ``radius_m`` conflicts with what is held at ``step`` (None: with
+        what stays after the horizon)."""
+        if step is None:
+            held = fp.region(*self.staying) if self.staying else None
+        else:
+            held = self.at(step)
         if held is None:
             return np.zeros(self.graph.size, dtype=bool)
         xy = self.graph.xy
@@ -244,11 +255,11 @@ def _plan_in_order(
     for r in requests:  # robots that cannot be planned stand where they are, for everyone
         if r.goal is None or graph.components[r.goal] != graph.components[r.start]:
             out.failures[r.name] = "unreachable"
-            table.add_plan(_standing(r))
+            table.add_plan(_standing(r), stays=True)
         elif r.name in standing:
             out.failures[r.name] = "blocked"
             out.plans[r.name] = _standing(r)
-            table.add_plan(out.plans[r.name])
+            table.add_plan(out.plans[r.name], stays=True)
         else:
             pending.append(r)
     # a robot keeps off where the robots after it stand (they may not get away in time: a robot
@@ -264,7 +275,7 @@ def _plan_in_order(
             out.failures[r.name] = "blocked"
             plan = _standing(r)
         out.plans[r.name] = plan
-        table.add_plan(plan)
+        table.add_plan(plan, stays=plan.complete and not plan.queued or r.name in out.failures)
     return out
 
 
@@ -305,10 +316,11 @@ def _plan_one(
     search = _Search(graph, r, table, timing)
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
     # obstacles), so a detour round a lane that stays blocked is found without searching the lane
-    held_late = table.blocked_nodes(timing.horizon, r.shape.half_width_m)
-    dist = graph.distances_to(r.goal, avoid=held_late, penalty_m=PENALTY_M)
+    staying = table.blocked_nodes(None, r.shape.half_width_m)
+    dist = graph.distances_to(r.goal, avoid=staying, penalty_m=PENALTY_M)
     if not dist[r.start] < PENALTY_M:  # every way passes something held later: pass it before
         dist = graph.distances_to(r.goal)
+    held_late = table.blocked_nodes(timing.horizon, r.shape.half_width_m)
     if not held_late[r.goal]:  # free at the horizon: go there
         plan = search.run(r.goal, dist, tail=r.goal_xy)
         if plan is not None:
