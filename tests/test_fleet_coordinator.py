@@ -106,6 +106,19 @@ def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
     assert fleet.min_gap_m() >= SAFETY_M
 
 
+def test_a_robot_facing_away_from_its_goal_in_a_lane_too_narrow_to_turn_drives_round() -> None:
+    # a pallet truck in a 1.6 m lane (no room to turn: reach 1.37 m) faces east, its goal lies west
+    # beyond the plan's window: it must drive east to the open floor, turn there and come back.
+    # Plain route lengths said "west is near" and the windowed plan stood still for good.
+    grid = grid_from_boxes((32, 10), [(5, 0, 27, 4.2), (5, 5.8, 27, 10)])
+    coordinator = FleetCoordinator(FleetConfig(horizon_s=20.0), CoordinatorContext(SAFETY_M, grid))
+    fleet = KinematicFleet(coordinator, {"t": ((10, 5.0, 0.0), [(2, 5)], TRUCK)})
+    fleet.run(200)
+    assert fleet.done("t")
+    assert fleet.path("t")[:, 0].max() > 27  # round by the open floor in the east
+    assert coordinator.state.failures == {}
+
+
 def test_idle_robot_in_a_single_lane_moves_aside_and_comes_back() -> None:
     # an idle robot (no goal) parked in the middle of a single-lane aisle stands in the only way:
     # the coordinator moves it out of the aisle, the other passes, then it returns to where it parked

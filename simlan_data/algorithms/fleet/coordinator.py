@@ -177,9 +177,9 @@ class FleetCoordinator:
         drive them, and robots then turn back and forth between two ways round."""
         for name, plan in self.state.plan.plans.items():
             route = self.state.routes.get(name)
-            if route is not None and (not plan.complete or plan.queued):
-                if 2 * route.progress >= len(route.nodes) - 1:
-                    return True
+            spent = route is not None and 2 * route.progress >= len(route.nodes) - 1
+            if spent and (not plan.complete or plan.queued):
+                return True
         return False
 
     def _replan(self, t_ns: int, graph: RouteGraph, movers: list[Intent], others: list[Intent]) -> None:

@@ -23,6 +23,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from simlan_data.algorithms.fleet.turns import TurnGraph
 from simlan_data.algorithms.occupancy import OccupancyGrid
 
 _NEIGHBOURS = ((0, 1), (1, -1), (1, 0), (1, 1))  # half of the 8-neighbourhood: each pair once
@@ -107,6 +108,26 @@ class RouteGraph:
         """Nodes where a robot whose footprint reaches ``reach_m`` from its centre turns in place
         without sweeping into an obstacle."""
         return self.clearance_m >= reach_m
+
+    @cached_property
+    def _turn_graphs(self) -> dict[tuple[float, float], TurnGraph]:
+        return {}
+
+    def turns(self, reach_m: float, tolerance_rad: float) -> TurnGraph:
+        """The forward-only moves of a robot of reach ``reach_m`` (built once per reach)."""
+        key = (round(reach_m, 6), round(tolerance_rad, 6))
+        if key not in self._turn_graphs:
+            arcs = self.arcs
+            d = self.xy[arcs[:, 1]] - self.xy[arcs[:, 0]]
+            self._turn_graphs[key] = TurnGraph(
+                arcs,
+                np.hypot(d[:, 0], d[:, 1]),
+                np.arctan2(d[:, 1], d[:, 0]),
+                self.turnable(reach_m),
+                tolerance_rad,
+                self.size,
+            )
+        return self._turn_graphs[key]
 
     def nearest(self, xy: tuple[float, float], *, within_m: float) -> int | None:
         """The node nearest to ``xy`` if one lies within ``within_m``, else None."""

@@ -38,6 +38,7 @@ from simlan_data.algorithms.fleet import footprint as fp
 from simlan_data.algorithms.fleet.conflicts import ConflictCache
 from simlan_data.algorithms.fleet.footprint import Region, Shape
 from simlan_data.algorithms.fleet.graph import RouteGraph
+from simlan_data.algorithms.fleet.turns import ToGoal
 
 START = -1  # ``prev`` of the start state: the robot stands at its real pose
 FROM_START = -2  # ``prev`` of the first vertex after it: the edge starts at the real pose
@@ -181,10 +182,8 @@ class Reservations:
     def blocked_nodes(self, step: int | None, radius_m: float) -> NDArray[np.bool_]:
         """Nodes where a disc of ``radius_m`` conflicts with what is held at ``step`` (None: with
         what stays after the horizon)."""
-        if step is None:
-            held = fp.region(*self.staying) if self.staying else None
-        else:
-            held = self.at(step)
+        staying = fp.region(*self.staying) if step is None and self.staying else None
+        held = staying if step is None else self.at(step)
         if held is None:
             return np.zeros(self.graph.size, dtype=bool)
         xy = self.graph.xy
@@ -275,7 +274,7 @@ def _plan_in_order(
             out.failures[r.name] = "blocked"
             plan = _standing(r)
         out.plans[r.name] = plan
-        table.add_plan(plan, stays=plan.complete and not plan.queued or r.name in out.failures)
+        table.add_plan(plan, stays=(plan.complete and not plan.queued) or r.name in out.failures)
     return out
 
 
@@ -317,12 +316,12 @@ def _plan_one(
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
     # obstacles), so a detour round a lane that stays blocked is found without searching the lane
     staying = table.blocked_nodes(None, r.shape.half_width_m)
-    dist = graph.distances_to(r.goal, avoid=staying, penalty_m=PENALTY_M)
-    if not dist[r.start] < PENALTY_M:  # every way passes something held later: pass it before
-        dist = graph.distances_to(r.goal)
+    to = search.to_goal(r.goal, avoid=staying)
+    if not search.start_h(to) < PENALTY_M / timing.spacing_m:  # every way passes something that
+        to = search.to_goal(r.goal)  # stays: pass it before
     held_late = table.blocked_nodes(timing.horizon, r.shape.half_width_m)
     if not held_late[r.goal]:  # free at the horizon: go there
-        plan = search.run(r.goal, dist, tail=r.goal_xy)
+        plan = search.run(r.goal, to, tail=r.goal_xy)
         if plan is not None:
             return plan
     if not queue:
@@ -330,6 +329,7 @@ def _plan_one(
     # held to the end of the horizon (a dock in use): the nearest node that stays free from the
     # second half of the horizon on, twice the conflict distance from the goal (the robot served
     # leaves past the queue)
+    dist = to.node_array
     apart = np.linalg.norm(graph.xy - graph.xy[r.goal], axis=1) > 2 * (2 * r.shape.reach_m + timing.safety_m)
     candidates = np.flatnonzero(apart & np.isfinite(dist))
     tried = 0
@@ -339,7 +339,7 @@ def _plan_one(
         if any(search.held_at(int(node), k) for k in range(timing.horizon // 2, timing.horizon + 1)):
             continue
         tried += 1
-        plan = search.run(int(node), graph.distances_to(int(node)), tail=None, budget=QUEUE_EXPANSIONS)
+        plan = search.run(int(node), search.to_goal(int(node)), tail=None, budget=QUEUE_EXPANSIONS)
         if plan is not None and plan.vertices[-1].node == node:
             plan.queued = True
             return plan
@@ -365,6 +365,7 @@ class _Search:
         self.graph, self.r, self.table, self.timing = graph, r, table, timing
         self.start_xy = np.asarray(r.start_xy, dtype=float)
         self.turnable = graph.turnable(r.shape.reach_m).tolist()
+        self.turns = graph.turns(r.shape.reach_m, timing.turn_tolerance_rad)
         self._bad: dict[int, NDArray[np.bool_] | None] = {}
         self._free: dict[tuple, bool] = {}
         self._regions: dict[tuple, Region] = {}
@@ -451,51 +452,86 @@ class _Search:
         return fp.conflict((c, c.copy(), np.array([self.r.shape.half_width_m])), held, self.timing.safety_m)
 
     # ------------------------------------------------------------------ search
+    def to_goal(self, goal: int, avoid: NDArray[np.bool_] | None = None) -> ToGoal:
+        """Forward-only route lengths to ``goal`` (``turns.py``); ``avoid``: nodes to keep off."""
+        return self.turns.to_goal(goal, avoid, PENALTY_M)
+
+    def start_h(self, to: ToGoal) -> float:
+        """The guide's steps to the goal from where the robot stands (the better of its two starts)."""
+        return min(self._start_h(to, turn) for turn in (False, True))
+
+    def _start_h(self, to: ToGoal, turn: bool) -> float:
+        r = self.r
+        if r.start == to.goal:
+            return 0.0
+        if turn:
+            return to.node[r.start] / self.timing.spacing_m if r.start_turnable else math.inf
+        best = math.inf
+        for v, length, angle in self._arcs(r.start, START):
+            if r.heading_rad is not None and length > 1e-9 and not self.turns.within(r.heading_rad, angle):
+                continue
+            rest = to.facing(v, angle) if v == r.start else to.arc[self.graph.arc_index[(r.start, v)]]
+            best = min(best, length + rest)
+        return best / self.timing.spacing_m
+
+    def _h(self, to: ToGoal, state: State) -> float:
+        """The guide's steps to the goal from a state (after the start)."""
+        v, _, came, turn = state
+        if turn:
+            return to.node[v] / self.timing.spacing_m
+        if came >= 0:
+            return to.arc[self.graph.arc_index[(came, v)]] / self.timing.spacing_m
+        return to.facing(v, self.heading(v, came)) / self.timing.spacing_m
+
     def run(
         self,
         target: int,
-        dist: NDArray[np.float64],
+        to: ToGoal,
         *,
         tail: tuple[float, float] | None,
         budget: int = MAX_EXPANSIONS,
     ) -> RobotPlan | None:
         """Earliest arrival at ``target`` that it can then hold; else the plan that ends nearest to it
-        at the horizon (a windowed plan); None if it cannot even keep clear until the horizon."""
+        at the horizon (a windowed plan); None if it cannot even keep clear until the horizon. The
+        guide ``to`` (forward-only lengths to ``target``) also keeps it out of places it could not
+        leave."""
         r, horizon = self.r, self.timing.horizon
-        if not np.isfinite(dist[r.start]):
-            return None
         if (self.target, self.tail) != (target, tail):
             self.target, self.tail = target, tail
             self._free = {k: v for k, v in self._free.items() if k[1][0] != "tail"}
-        h = (dist / self.timing.spacing_m).tolist()
         parent: dict[State, State | None] = {}
         heap: list[tuple[float, int, State]] = []
         tie = 0
         for turn in (False, True):
-            if turn and not r.start_turnable:
+            h0 = self._start_h(to, turn)
+            if (turn and not r.start_turnable) or not math.isfinite(h0):
                 continue
             s = (r.start, 0, START, turn)
             parent[s] = None
-            heapq.heappush(heap, (h[r.start], tie := tie + 1, s))
+            heapq.heappush(heap, (h0, tie := tie + 1, s))
         expanded = 0
         while heap and expanded < budget:
-            _, _, state = heapq.heappop(heap)
+            f, _, state = heapq.heappop(heap)
             expanded += 1
             u, k, prev, turn = state
-            if u == target and (prev != START or dist[r.start] == 0) and self._holds(state):
+            if u == target and (prev != START or r.start == target) and self._holds(state):
                 return self._plan(parent, state, complete=True)
             if k >= horizon:  # the first state popped at the horizon ends nearest to the target
                 # (consistent heuristic, f = horizon + h): the windowed plan
                 return self._plan(parent, state, complete=False)
+            h_here = f - k
             for nxt in self._moves(state):
                 if nxt in parent:
                     continue
+                h = h_here if nxt[0] == u and nxt[2] == prev else self._h(to, nxt)
+                if not math.isfinite(h):
+                    continue  # a place it could not leave towards the target
                 here = (u, prev, turn)
                 parts = (here,) if nxt[0] == u and nxt[2] == prev else (here, (nxt[0], nxt[2], nxt[3]))
                 if not all(self.free(j, parts) for j in range(k + 1, nxt[1] + 1)):
                     continue
                 parent[nxt] = state
-                heapq.heappush(heap, (nxt[1] + h[nxt[0]], tie := tie + 1, nxt))
+                heapq.heappush(heap, (nxt[1] + h, tie := tie + 1, nxt))
         return None  # it cannot even keep clear until the horizon (or the search gave up)
 
     def _holds(self, state: State) -> bool:
