@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.localization_filter import PoseFix, UnicycleEKF
+from simlan_data.algorithms.marker_refinement import refine_corners
 from simlan_data.algorithms.markers import (
     POSE_METHODS,
     Detection,
@@ -44,6 +45,7 @@ from simlan_data.geometry.transforms import Transform
 from simlan_data.imaging.jpeg_regions import decode_gray_regions
 
 Roi = tuple[int, int, int, int]
+CORNER_METHODS = ("pattern", "contour")
 
 
 def _decode_gray(data: NDArray[np.uint8] | None) -> NDArray[np.uint8]:
@@ -56,6 +58,9 @@ def _decode_gray(data: NDArray[np.uint8] | None) -> NDArray[np.uint8]:
 @dataclass(frozen=True)
 class LocalizerParams:
     method: str = "ground"  # ground (ray / marker-plane intersection) | pnp (IPPE_SQUARE)
+    corners: str = "pattern"  # pattern (contour corners aligned to the whole marker pattern, ECC) |
+    # contour (ArUco's contour fit alone: up to 0.9 deg of yaw per camera near headings along the
+    # pixel grid, held while a robot stands; docs/benchmarks/gpss.md)
     unobserved_timeout_s: float = 0.5  # no fix for longer: the agent is unobserved
     lost_timeout_s: float = 1.5  # no fix for longer: estimate withheld, full-frame search
     processing_delay_s: float = 0.0  # image capture -> fix usable by the filter
@@ -83,6 +88,13 @@ class LocalizerParams:
                 self.method,
                 f"expected one of {', '.join(POSE_METHODS)}",
                 f"set {key}method=ground",
+            )
+        if self.corners not in CORNER_METHODS:
+            raise ConfigError.invalid(
+                key + "corners",
+                self.corners,
+                f"expected one of {', '.join(CORNER_METHODS)}",
+                f"set {key}corners=pattern",
             )
         if not self.unobserved_timeout_s > 0:
             raise ConfigError.invalid(
@@ -394,7 +406,10 @@ class Localizer:
             return ImageSearch(cached[0], cached[1], time.perf_counter() - t0)
         detector = self._thread_detector()
         if isinstance(plan, str):  # "full"
-            detections = detector.detect(camera_id, gray if gray is not None else _decode_gray(data))
+            image = gray if gray is not None else _decode_gray(data)
+            detections = [
+                self._refined(camera_id, d, image, (0, 0)) for d in detector.detect(camera_id, image)
+            ]
         else:
             # only the regions searched: same pixels as a whole decode (jpeg_regions), or None
             # for a JPEG without restart markers
@@ -405,13 +420,23 @@ class Localizer:
             found: dict[int, Detection] = {}
             for roi, pixels in zip(plan, crops):
                 for d in detector.detect_region(camera_id, pixels, (roi[0], roi[1])):
-                    found.setdefault(d.marker_id, d)
+                    if d.marker_id not in found:
+                        found[d.marker_id] = self._refined(camera_id, d, pixels, (roi[0], roi[1]))
             detections = [found[k] for k in sorted(found)]
         observations = self._poses(camera_id, detections)
         if key is not None:  # (a lost entry only costs a search again: the content is the same)
             self._full_cache = {k: v for k, v in self._full_cache.items() if k[0] != camera_id}
             self._full_cache[key] = (detections, observations)
         return ImageSearch(detections, observations, time.perf_counter() - t0)
+
+    def _refined(
+        self, camera_id: str, det: Detection, pixels: NDArray[np.uint8], origin: tuple[int, int]
+    ) -> Detection:
+        """``det`` with its corners aligned to the marker's pattern (``corners=pattern``; a
+        marker of the fleet only: the others are not used)."""
+        if self.params.corners != "pattern" or det.marker_id not in self._by_marker:
+            return det
+        return refine_corners(self.cameras[camera_id], det, pixels, origin)
 
     def _poses(self, camera_id: str, detections: list[Detection]) -> list[MarkerObservation]:
         """The usable marker poses of one camera's detections (known marker, valid, large enough)."""
