@@ -316,12 +316,22 @@ def _plan_one(
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
     # obstacles), so a detour round a lane that stays blocked is found without searching the lane
     staying = table.blocked_nodes(None, r.shape.half_width_m)
-    to = search.to_goal(r.goal, avoid=staying)
-    if not search.start_h(to) < PENALTY_M / timing.spacing_m:  # every way passes something that
-        to = search.to_goal(r.goal)  # stays: pass it before
-    held_late = table.blocked_nodes(timing.horizon, r.shape.half_width_m)
-    if not held_late[r.goal]:  # free at the horizon: go there
+    goal = r.goal
+
+    def guide(forward: bool) -> ToGoal:
+        to = search.to_goal(goal, avoid=staying, forward=forward)
+        if search.start_h(to) < PENALTY_M / timing.spacing_m:
+            return to
+        return search.to_goal(goal, forward=forward)  # every way passes something that stays
+
+    to = guide(forward=False)
+    if not table.blocked_nodes(timing.horizon, r.shape.half_width_m)[r.goal]:  # free at the horizon
         plan = search.run(r.goal, to, tail=r.goal_xy)
+        if plan is not None and not plan.complete and len(plan.vertices) == 1:
+            # it would stand still: plain route lengths may point the way it cannot turn to (a lane
+            # too narrow to turn in), forward-only ones send it on to where it can
+            ahead = search.run(r.goal, guide(forward=True), tail=r.goal_xy)
+            plan = ahead if ahead is not None and len(ahead.vertices) > 1 else plan
         if plan is not None:
             return plan
     if not queue:
@@ -452,9 +462,10 @@ class _Search:
         return fp.conflict((c, c.copy(), np.array([self.r.shape.half_width_m])), held, self.timing.safety_m)
 
     # ------------------------------------------------------------------ search
-    def to_goal(self, goal: int, avoid: NDArray[np.bool_] | None = None) -> ToGoal:
-        """Forward-only route lengths to ``goal`` (``turns.py``); ``avoid``: nodes to keep off."""
-        return self.turns.to_goal(goal, avoid, PENALTY_M)
+    def to_goal(self, goal: int, avoid: NDArray[np.bool_] | None = None, *, forward: bool = False) -> ToGoal:
+        """Route lengths to ``goal``; ``forward``: for a robot that cannot reverse and turns only where
+        it may (``turns.py``); ``avoid``: nodes to keep off."""
+        return self.turns.to_goal(goal, avoid, PENALTY_M, forward=forward)
 
     def start_h(self, to: ToGoal) -> float:
         """The guide's steps to the goal from where the robot stands (the better of its two starts)."""
@@ -464,8 +475,10 @@ class _Search:
         r = self.r
         if r.start == to.goal:
             return 0.0
-        if turn:
-            return to.node[r.start] / self.timing.spacing_m if r.start_turnable else math.inf
+        if turn and not r.start_turnable:
+            return math.inf
+        if turn or to.plain:
+            return to.node[r.start] / self.timing.spacing_m
         best = math.inf
         for v, length, angle in self._arcs(r.start, START):
             if r.heading_rad is not None and length > 1e-9 and not self.turns.within(r.heading_rad, angle):

@@ -23,6 +23,8 @@ from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+CACHED = 512  # goals (with what they avoid) whose lengths are kept
+
 
 class TurnGraph:
     """The moves between arcs of a route graph for one robot reach (see the module docstring)."""
@@ -50,16 +52,45 @@ class TurnGraph:
                     src.append(a)
                     dst.append(b)
         self.moves = (np.asarray(src, dtype=np.int64), np.asarray(dst, dtype=np.int64))
+        self._cache: dict[tuple[int, bytes | None, float, bool], ToGoal] = {}  # replans ask the same again
 
     def within(self, heading: float, angle: float) -> bool:
         return abs((angle - heading + math.pi) % (2 * math.pi) - math.pi) <= self.tolerance_rad
 
-    def to_goal(self, goal: int, avoid: NDArray[np.bool_] | None = None, penalty_m: float = 0.0) -> ToGoal:
+    def to_goal(
+        self,
+        goal: int,
+        avoid: NDArray[np.bool_] | None = None,
+        penalty_m: float = 0.0,
+        *,
+        forward: bool = True,
+    ) -> ToGoal:
         """Length still to drive to ``goal`` from every arc and node; with ``avoid``, every arc
         touching an avoided node costs ``penalty_m`` more."""
-        cost = self.lengths_m
-        if avoid is not None and avoid.any():
-            cost = cost + penalty_m * (avoid[self.arcs[:, 0]] | avoid[self.arcs[:, 1]])
+        avoided = avoid is not None and bool(avoid.any())
+        key = (
+            goal,
+            np.packbits(avoid).tobytes() if avoid is not None and avoided else None,
+            penalty_m,
+            forward,
+        )
+        if key not in self._cache:
+            if len(self._cache) >= CACHED:
+                del self._cache[next(iter(self._cache))]  # the oldest
+            cost = self.lengths_m
+            if avoid is not None and avoided:
+                cost = cost + penalty_m * (avoid[self.arcs[:, 0]] | avoid[self.arcs[:, 1]])
+            self._cache[key] = self._forward(goal, cost) if forward else self._plain(goal, cost)
+        return self._cache[key]
+
+    def _plain(self, goal: int, cost: NDArray[np.float64]) -> ToGoal:
+        """Route lengths that ignore heading: any turn anywhere (the arc's end node's length)."""
+        graph = csr_matrix((cost, (self.arcs[:, 0], self.arcs[:, 1])), shape=(self.size, self.size))
+        node_m = np.asarray(dijkstra(graph, directed=True, indices=goal))  # (symmetric: to = from)
+        arc_m = node_m[self.arcs[:, 1]]
+        return ToGoal(self, goal, arc_m, node_m, cost + arc_m, plain=True)
+
+    def _forward(self, goal: int, cost: NDArray[np.float64]) -> ToGoal:
         src, dst = self.moves
         n = len(self.arcs)
         # reversed moves: from the arc after to the arc before, weighted by the arc after
@@ -87,8 +118,10 @@ class ToGoal:
         arc_m: NDArray[np.float64],
         node_m: NDArray[np.float64],
         leave: NDArray[np.float64],
+        *,
+        plain: bool = False,
     ) -> None:
-        self.turns, self.goal = turns, goal
+        self.turns, self.goal, self.plain = turns, goal, plain
         self.arc = arc_m.tolist()  # arrived at the arc's end node, facing along it
         self.node = node_m.tolist()  # at the node, free to turn
         self.node_array = node_m
@@ -96,7 +129,7 @@ class ToGoal:
 
     def facing(self, node: int, heading: float | None) -> float:
         """From ``node`` facing ``heading`` without turning in place (None: any heading)."""
-        if heading is None or self.node[node] == 0.0:
+        if heading is None or self.plain or self.node[node] == 0.0:
             return self.node[node]
         ok = [
             self._leave[b] for b in self.turns.out[node] if self.turns.within(heading, self.turns.angles[b])
