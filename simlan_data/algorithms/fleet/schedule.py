@@ -274,7 +274,7 @@ def _plan_in_order(
             out.failures[r.name] = "blocked"
             plan = _standing(r)
         out.plans[r.name] = plan
-        table.add_plan(plan, stays=(plan.complete and not plan.queued) or r.name in out.failures)
+        table.add_plan(plan, stays=r.name in out.failures)
     return out
 
 
