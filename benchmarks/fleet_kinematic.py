@@ -10,7 +10,7 @@ robots follow the coordinator's routes exactly at their mission speed, no physic
 ground-truth poses). Counts goals reached, missions done, deadlocks (the coordinator's), failures,
 the smallest footprint-to-footprint gap, makespan, tasks per hour and the planning time. This
 measures the coordination itself; the closed loop in the simulator is the sweep in docs/fleet.md.
-Writes JSON with a ``figures`` list for benchmarks/summary.py.
+Writes JSON with a ``figures`` list (one per fleet size) for benchmarks/summary.py.
 """
 
 from __future__ import annotations
@@ -87,6 +87,19 @@ def summary(rows: list[dict]) -> dict[int, dict]:
     return out
 
 
+def figures(table: dict[int, dict], limit_s: float) -> list[dict]:
+    """One BENCHMARKS row per fleet size (benchmarks/summary.py)."""
+    return [
+        {"id": f"fleet_kinematic_{n}", "figure": f"fleet coordinator alone, {n} robots, seeded missions (kinematic robots): missions done",
+         "value": row["missions_done"], "unit": f"of {row['runs']}", "target": "every task done, 0 deadlocks",
+         "baseline": "none in this benchmark: gpss and independent robots give no routes to drive; the closed loop compares them",
+         "note": f"goals {row['goals_reached']}, deadlocks {row['deadlocks']}, smallest gap {row['min_gap_m']} m, "
+                 f"{row['tasks_per_hour_mean']} tasks/h, makespan {row['makespan_s_mean']} s (limit {limit_s:g} s), "
+                 f"{row['wall_s_per_run']} s wall per run"}
+        for n, row in table.items()
+    ]  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--robots", default="4,8,12")
@@ -107,13 +120,17 @@ def main() -> None:
     table = summary(rows)
     for n, row in table.items():
         print(n, row, flush=True)
+    command = (
+        f"python benchmarks/fleet_kinematic.py --robots {args.robots} --seeds {args.seeds}"
+        f" --tasks {args.tasks} --limit-s {args.limit_s:g} --json FILE"
+    )
     result = {
-        "command": f"python benchmarks/fleet_kinematic.py --robots {args.robots} --seeds {args.seeds}"
-        f" --tasks {args.tasks} --json FILE",
+        "command": command,
         "machine": machine(),
         "date": datetime.date.today().isoformat(),
         "history": "docs/benchmarks/fleet.md",
         "summary": table,
+        "figures": figures(table, args.limit_s),
         "rows": rows,
     }
     if args.json:

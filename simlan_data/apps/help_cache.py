@@ -124,4 +124,3 @@ def serve_cached_help(argv: Sequence[str]) -> bool:
         return False
     sys.stdout.write(text)
     return True
-

@@ -137,7 +137,9 @@ class Reservations:
         self.graph, self.horizon, self.safety_m = graph, horizon, safety_m
         self.parts: list[list[Region]] = [[] for _ in range(horizon + 1)]
         # what stays where it is after the horizon too: obstacles, robots standing, robots at their
-        # goal (not the ends of windowed plans: those robots drive on in the next window)
+        # goal (not the ends of windowed plans: those robots drive on in their next window). Robots
+        # at their goal stay in: without them (b40de1c) 8-robot missions planned over twice as long
+        # and a held-out case reached fewer goals (docs/fleet.md, Measured)
         self.staying: list[Region] = []
         self._merged: dict[int, Region] = {}
         # robots not planned yet: where they stand, and until which step (the time they need to
@@ -274,7 +276,7 @@ def _plan_in_order(
             out.failures[r.name] = "blocked"
             plan = _standing(r)
         out.plans[r.name] = plan
-        table.add_plan(plan, stays=r.name in out.failures)
+        table.add_plan(plan, stays=(plan.complete and not plan.queued) or r.name in out.failures)
     return out
 
 
