@@ -19,6 +19,7 @@ import hashlib
 import threading
 import time
 from collections import deque
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -55,6 +56,12 @@ def _decode_gray(data: NDArray[np.uint8] | None) -> NDArray[np.uint8]:
     return np.asarray(cv2.imdecode(data, cv2.IMREAD_GRAYSCALE), dtype=np.uint8)
 
 
+def _one_of(key: str, value: str, choices: Collection[str], default: str) -> None:
+    """A choice key's value must be one of ``choices`` (the fix names ``default``)."""
+    if value not in choices:
+        raise ConfigError.invalid(key, value, f"expected one of {', '.join(choices)}", f"set {key}={default}")
+
+
 @dataclass(frozen=True)
 class LocalizerParams:
     method: str = "ground"  # ground (ray / marker-plane intersection) | pnp (IPPE_SQUARE)
@@ -82,20 +89,8 @@ class LocalizerParams:
 
     def __post_init__(self) -> None:
         key = "algorithms.localizer."
-        if self.method not in POSE_METHODS:
-            raise ConfigError.invalid(
-                key + "method",
-                self.method,
-                f"expected one of {', '.join(POSE_METHODS)}",
-                f"set {key}method=ground",
-            )
-        if self.corners not in CORNER_METHODS:
-            raise ConfigError.invalid(
-                key + "corners",
-                self.corners,
-                f"expected one of {', '.join(CORNER_METHODS)}",
-                f"set {key}corners=pattern",
-            )
+        _one_of(key + "method", self.method, POSE_METHODS, "ground")
+        _one_of(key + "corners", self.corners, CORNER_METHODS, "pattern")
         if not self.unobserved_timeout_s > 0:
             raise ConfigError.invalid(
                 key + "unobserved_timeout_s", self.unobserved_timeout_s, "must be > 0", "use 0.5"
