@@ -3,15 +3,17 @@
 A robot on the route graph cannot reverse, and it changes heading by more than the turn tolerance
 only at a node whose clearance covers its reach (``RouteGraph.turnable``). Plain graph distances
 ignore both: from inside a single-lane aisle facing a dead end, the way back looks short although
-the robot can never take it. The space-time search used such distances to pick where a windowed
-plan ends, and it drove robots into aisles they could not leave (measured: a pallet truck facing
-the upper aisle's dead-end pocket stood there for the rest of an 8-robot mission).
+the robot can never take it, and a windowed plan guided by them left a pallet truck standing in
+the upper aisle for the rest of an 8-robot mission. The search (``schedule.py``) is guided by plain
+lengths first (``TurnGraph.to_goal(forward=False)``: as the first guide, forward-only lengths sent
+trucks to the same turning pocket at once) and by forward-only ones when a plan would leave the
+robot standing.
 
 Here the states are the directed edges (arcs) of the graph, "just arrived at v from u", and a move
 from arc (u, v) to arc (v, w) exists when the heading change is within the tolerance or the robot
 may turn at v. Dijkstra over the reversed moves from every arc that ends at the goal gives, per
-arc, the length still to drive; a state from which the goal cannot be reached gets ``inf``, so the
-search never enters it.
+arc, the length still to drive; a state from which the goal cannot be reached gets ``inf``, so a
+search guided by them never enters it. Both kinds are cached per goal and avoided nodes.
 """
 
 from __future__ import annotations
