@@ -20,7 +20,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from simlan_data.algorithms.fleet.turns import TurnGraph
@@ -133,18 +133,6 @@ class RouteGraph:
         """The node nearest to ``xy`` if one lies within ``within_m``, else None."""
         dist, index = self.tree.query(np.asarray(xy, dtype=float))
         return int(index) if np.isfinite(dist) and dist <= within_m else None
-
-    def distances_to(
-        self, node: int, *, avoid: NDArray[np.bool_] | None = None, penalty_m: float = 1000.0
-    ) -> NDArray[np.float64]:
-        """Shortest route length from every node to ``node`` (inf where unreachable); with
-        ``avoid``, every edge touching an avoided node costs ``penalty_m`` more (routes that avoid
-        them come first, those through them still count)."""
-        if avoid is None or not avoid.any():
-            return dijkstra(self.matrix, directed=False, indices=node)
-        m = self.matrix.tocoo()
-        data = m.data + penalty_m * (avoid[m.row] | avoid[m.col])
-        return dijkstra(csr_matrix((data, (m.row, m.col)), shape=m.shape), directed=False, indices=node)
 
 
 def build_route_graph(
