@@ -13,7 +13,7 @@ from simlan_data.algorithms.markers import MarkerObservation
 from simlan_data.config.faults import CameraFaults, with_yaw_error
 from simlan_data.config.validation import to_config
 from simlan_data.errors import ConfigError
-from simlan_data.evaluation.camera_health import CameraConsistency
+from simlan_data.evaluation.camera_health import MIN_SHARED_FRAMES, CameraConsistency
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.recording.reader import RecordingReader
 
@@ -145,3 +145,19 @@ def test_camera_health_points_at_the_camera_that_disagrees() -> None:
     assert m["p.camera_162.disagreement_m"] < 0.032 and m["p.camera_164.disagreement_m"] < 0.032
     assert m["p.camera_disagreement_max_m"] == m["p.camera_163.disagreement_m"]
     assert "p.camera_170.disagreement_m" not in m
+
+
+def test_camera_health_gives_no_figure_to_a_camera_that_shared_a_marker_too_rarely() -> None:
+    health = CameraConsistency()
+    for k in range(10):
+        x = 0.1 * k
+        health.add([obs("162", x, 0.0), obs("163", x + 0.004, 0.0)])
+    for _ in range(MIN_SHARED_FRAMES - 1):  # too rarely, 2 cm off, at the edge of its image
+        health.add([obs("160", 0.92, 0.0), obs("162", 0.9, 0.0)])
+    m = health.metrics("p.")
+    assert m["p.cameras_detecting"] == 3  # it delivered: it counts as detecting
+    assert "p.camera_160.disagreement_m" not in m
+    assert m["p.camera_disagreement_max_m"] == pytest.approx(
+        max(m["p.camera_162.disagreement_m"], m["p.camera_163.disagreement_m"])
+    )
+    assert m["p.camera_disagreement_max_m"] < 0.01
