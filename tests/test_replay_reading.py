@@ -75,7 +75,7 @@ def test_rows_collected_while_reading_make_the_same_tables(short_run: Path) -> N
         recorded = RecordedRows(estimates_of=namespaces, navigation_of=namespaces)
         with lr.ReadingProcess(reader, lr.image_camera_ids(reader, config), namespaces, recorded) as reading:
             sets = list(reading)
-        assert len(sets) >= 10 and all(len(jpegs) >= 1 for _, jpegs, _ in sets)
+        assert len(sets) >= 10 and all(len(jpegs) >= 1 for _, jpegs, _, _ in sets)
         truth, live = ground_truth(reader), estimates_from_recording(reader, namespaces)
     assert recorded.truth_tables().keys() == truth.keys()
     for ns, table in truth.items():
@@ -89,7 +89,7 @@ def test_reading_process_errors_are_raised_in_the_replay_and_early_stops_end_it(
     short_run: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     def broken(*_args, **_kwargs):
-        yield 0, {}, []
+        yield 0, {}, [], {}
         raise RecordingInputError("message undecodable", "bag", "corrupt chunk", "recover it")
 
     with RecordingReader(short_run / "recording") as reader:
@@ -97,7 +97,7 @@ def test_reading_process_errors_are_raised_in_the_replay_and_early_stops_end_it(
         monkeypatch.setattr(lr, "frame_sets", broken)
         reading = lr.ReadingProcess(reader, [], [], RecordedRows())
         items = iter(reading)
-        assert next(items) == (0, {}, [])
+        assert next(items) == (0, {}, [], {})
         with pytest.raises(RecordingInputError, match="message undecodable in bag: corrupt chunk"):
             next(items)
         monkeypatch.undo()

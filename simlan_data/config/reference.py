@@ -267,6 +267,8 @@ def iter_rows(
         doc = docs.get(f.name) or yaml_docs.get(key, "")
         sub = _dataclass_of(hint, value)
         if sub is not None:
+            if prefix:  # a group of keys within a section: a row of its own, then its keys
+                yield KeyRow(key, "group", "", "", doc or _first_line(sub))
             yield from iter_rows(sub, value, root, path, yaml_docs, probe_prefix=probe)
             continue
         origin, args = typing.get_origin(hint), typing.get_args(hint)

@@ -24,6 +24,7 @@ from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms,
 from simlan_data.config.collision import CollisionScenarioConfig
 from simlan_data.config.live import LiveConfig
 from simlan_data.config.missions import MissionsConfig
+from simlan_data.config.sensors import SensorsConfig
 from simlan_data.errors import ConfigError
 from simlan_data.recording.timebase import DEFAULT_EPOCH, parse_epoch
 from simlan_data.world.physics import PhysicsParams
@@ -419,6 +420,7 @@ class Config:
     collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
     live: LiveConfig = field(default_factory=LiveConfig)  # a live view in Foxglove (config/live.py)
     fleet: MissionsConfig = field(default_factory=MissionsConfig)  # scenario=fleet (config/missions.py)
+    sensors: SensorsConfig = field(default_factory=SensorsConfig)  # realistic cameras (config/sensors.py)
 
     def __post_init__(self) -> None:
         if _incomplete(self):

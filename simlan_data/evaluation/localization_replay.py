@@ -49,7 +49,7 @@ from simlan_data.evaluation.metrics import (
     yaw_as_recorded,
 )
 from simlan_data.evaluation.replay import ReplayContext, register
-from simlan_data.recording.messages import compressed_image_data
+from simlan_data.recording.messages import compressed_image_data, header_stamp_ns, stamp_ns_of
 from simlan_data.recording.reader import RecordingReader
 from simlan_data.world.agent_types import MARKER_SIZE_M, agent_type
 
@@ -105,7 +105,9 @@ def marker_mounts(config: dict[str, Any]) -> tuple[list[MarkerMount], dict[str, 
     return mounts, {}
 
 
-FrameSet = tuple[int | None, dict[str, Any], list[tuple[int, str, float, float]]]
+# (log time, JPEG bytes per camera, commands since the last set, per camera the stamp its header
+# carries where it is not the log time: a camera with its own clock, sensors.timing)
+FrameSet = tuple[int | None, dict[str, Any], list[tuple[int, str, float, float]], dict[str, int]]
 
 
 def frame_sets(
@@ -126,6 +128,7 @@ def frame_sets(
     images = {f"/camera_{c}{IMAGE_SUFFIX}": c for c in camera_ids}
     command_topics = {f"/{ns}/cmd_vel": ns for ns in namespaces}
     pending: dict[str, Any] = {}
+    stamps: dict[str, int] = {}
     pending_t: int | None = None
     cmds: list[tuple[int, str, float, float]] = []
     extra = set(recorded.topics) if recorded is not None else set()
@@ -142,14 +145,21 @@ def frame_sets(
             continue
         if m.stamp_ns != pending_t:
             if pending_t is not None:
-                yield pending_t, pending, cmds
+                yield pending_t, pending, cmds, stamps
                 cmds = []
-            pending, pending_t = {}, m.stamp_ns
+            pending, stamps, pending_t = {}, {}, m.stamp_ns
         # the JPEG bytes without deserializing the message (most images are never searched)
         data = compressed_image_data(m.msg)
-        pending[images[m.topic]] = data if data is not None else reader.deserialize(m).msg.data
+        cid = images[m.topic]
+        pending[cid] = data if data is not None else reader.deserialize(m).msg.data
+        header = header_stamp_ns(m.msg)
+        if header is None:
+            header = stamp_ns_of(reader.deserialize(m).msg.header.stamp)
+        stamp = header - reader.epoch_ns
+        if stamp != m.stamp_ns:
+            stamps[cid] = stamp
     if pending_t is not None or cmds:
-        yield pending_t, pending, cmds
+        yield pending_t, pending, cmds, stamps
 
 
 T = TypeVar("T")
@@ -233,8 +243,8 @@ def _read_frame_sets(
             reader.detach_after_fork()
         except Exception:  # (another rosbags layout) open the recording again
             reader = RecordingReader(reader.path, check_format=False)
-        for stamp_ns, jpegs, cmds in frame_sets(reader, camera_ids, namespaces, recorded):
-            conn.send(("item", (stamp_ns, list(jpegs), cmds)))
+        for stamp_ns, jpegs, cmds, stamps in frame_sets(reader, camera_ids, namespaces, recorded):
+            conn.send(("item", (stamp_ns, list(jpegs), cmds, stamps)))
             for data in jpegs.values():
                 conn.send_bytes(data)
         conn.send(("recorded", recorded.rows()))
@@ -295,8 +305,8 @@ class ReadingProcess:
                         "replay without --set reader=process",
                     ) from None
                 if kind == "item":
-                    stamp_ns, cids, cmds = value
-                    yield stamp_ns, {c: receive.recv_bytes() for c in cids}, cmds
+                    stamp_ns, cids, cmds, stamps = value
+                    yield stamp_ns, {c: receive.recv_bytes() for c in cids}, cmds, stamps
                 elif kind == "recorded":
                     self.recorded.take(value)
                 elif kind == "small":
@@ -371,12 +381,12 @@ def replay_localizer(
     )
     workers = max(1, min(8, os.cpu_count() or 1) - 1)  # (and this thread)
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="search") as pool:
-        for stamp_ns, jpegs, cmds in sets:
+        for stamp_ns, jpegs, cmds, stamps in sets:
             for t_ns, ns, v, w in cmds:
                 replay.commands.setdefault(t_ns, []).append((ns, v, w))
             # (a reading process may read cameras the localizer was not given: a fault)
             if stamp_ns is not None and any(c in jpegs for c in camera_order):
-                replay.frame_set(pool, stamp_ns, jpegs)
+                replay.frame_set(pool, stamp_ns, jpegs, stamps)
     replay.control_until(duration_ns, inclusive=True)
     return localizer, {ns: status_table(est, status) for ns, (est, status) in replay.rows.items()}
 
@@ -425,23 +435,32 @@ class _LocalizerReplay:
                     est_rows.append((tick, e.x_m, e.y_m, yaw_as_recorded(e.yaw_rad)))
             self.next_tick = next(self.ticks, None)
 
-    def frame_set(self, pool: ThreadPoolExecutor, pending_t: int, pending: dict[str, Any]) -> None:
-        """Localize one frame set between the control ticks before it and the one at it."""
+    def frame_set(
+        self, pool: ThreadPoolExecutor, pending_t: int, pending: dict[str, Any], stamps: dict[str, int]
+    ) -> None:
+        """Localize one frame set between the control ticks before it and the one at it; each image
+        at the stamp its camera wrote (``stamps``, where it is not the set's)."""
         self.control_until(pending_t, inclusive=False)
         localizer = self.localizer
         ids = [cid for cid in self.camera_order if cid in pending]
         if not self.searching:  # the localizer takes the frames whole, as live
-            localizer.observe(pending_t, {c: CameraFrame(c, pending_t, bytes(pending[c])) for c in ids})
+            frames = {c: CameraFrame(c, stamps.get(c, pending_t), bytes(pending[c])) for c in ids}
+            localizer.observe(pending_t, frames)
             self.control_until(pending_t, inclusive=True)
             return
-        self._search(pool, pending_t, pending, ids)
+        self._search(pool, pending_t, pending, ids, stamps)
         localizer.close_frame(pending_t)
         if self.consistency is not None and hasattr(localizer, "last_observations"):
             self.consistency.add(localizer.last_observations)
         self.control_until(pending_t, inclusive=True)
 
     def _search(
-        self, pool: ThreadPoolExecutor, pending_t: int, pending: dict[str, Any], ids: list[str]
+        self,
+        pool: ThreadPoolExecutor,
+        pending_t: int,
+        pending: dict[str, Any],
+        ids: list[str],
+        stamps: dict[str, int],
     ) -> None:
         """Search the planned images on the workers and this thread; observe them in camera order."""
         # the planned images of a frame set are decoded and searched, and the markers' poses
@@ -449,7 +468,10 @@ class _LocalizerReplay:
         # releases the GIL); what they found is taken in camera order, exactly as the live run
         # and process_image do
         localizer = self.localizer
-        planned = list(zip(ids, localizer.search_plans(pending_t, ids)))
+        if stamps:  # cameras with clocks of their own: each planned at its own stamp, as live
+            planned = [(cid, localizer.search_plans(stamps.get(cid, pending_t), [cid])[0]) for cid in ids]
+        else:
+            planned = list(zip(ids, localizer.search_plans(pending_t, ids)))
         jobs = [
             (cid, plan, pool.submit(localizer.detect, cid, plan, jpeg=pending[cid]))
             for cid, plan in planned
@@ -463,7 +485,8 @@ class _LocalizerReplay:
                 break
             own[cid] = localizer.detect(cid, plan, jpeg=pending[cid])
         for cid, plan, job in jobs:
-            localizer.observe_search(pending_t, cid, plan, own[cid] if cid in own else job.result())
+            found = own[cid] if cid in own else job.result()
+            localizer.observe_search(stamps.get(cid, pending_t), cid, plan, found)
 
 
 @register("localization")

@@ -157,6 +157,9 @@ UNITS: dict[str, MetricUnit] = {
     "sim.physics_steps": MetricUnit(_COUNT, "physics steps"),
     "sim.camera_frames": MetricUnit(_COUNT, "camera frames rendered"),
     "sim.camera_frames_changed": MetricUnit(_COUNT, "camera frames whose image changed"),
+    "sim.camera_frames_dropped": MetricUnit(
+        _COUNT, "camera frames lost by the camera stage (sensors.timing.drop_rate)"
+    ),
     "sim.render_wall_s": MetricUnit("s", "wall time spent rendering"),
     "sim.localize_wall_s": MetricUnit("s", "wall time spent localizing"),
     # ----------------------------------------------------------------------------- recording

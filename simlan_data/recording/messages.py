@@ -52,6 +52,7 @@ Duration = T["builtin_interfaces/msg/Duration"]
 MeshFile = T["visualization_msgs/msg/MeshFile"]
 SafetyEventMsg = T[schema.SAFETY_EVENT_TYPE]
 SafetyStateMsg = T[schema.SAFETY_STATE_TYPE]
+CameraEffectsMsg = T[schema.CAMERA_EFFECTS_TYPE]
 MARKER_ADD, MARKER_LINE_STRIP, MARKER_TEXT = 0, 4, 9  # visualization_msgs/Marker constants
 
 
@@ -81,6 +82,16 @@ def restamp(cdr: bytes, stamp_ns: int) -> bytes:
 
 
 _U32 = struct.Struct("<I")
+
+
+def header_stamp_ns(cdr: bytes | memoryview) -> int | None:
+    """The header stamp (bag time) of a serialized message whose first field is a std_msgs/Header,
+    without deserializing it; None if ``cdr`` is not little-endian CDR."""
+    view = memoryview(cdr).cast("B")
+    if len(view) < 12 or view[:4] != _CDR_LE:
+        return None
+    sec, nanosec = _STAMP.unpack_from(view, 4)
+    return sec * NS_PER_S + nanosec
 
 
 def compressed_image_data(cdr: bytes | memoryview) -> memoryview | None:
@@ -197,6 +208,30 @@ def twist_stamped(stamp_ns: int, frame_id: str, linear_mps: float, angular_rps: 
             linear=Vector3(x=float(linear_mps), y=0.0, z=0.0),
             angular=Vector3(x=0.0, y=0.0, z=float(angular_rps)),
         ),
+    )
+
+
+def camera_effects(
+    stamp_ns: int,
+    frame_id: str,
+    written_ns: int,
+    *,
+    dropped: bool,
+    noise_phase: int,
+    exposure_scale: float,
+    gain: float,
+    true_pose: Transform,
+) -> Any:
+    """simlan_msgs/CameraEffects: what the camera stage did to one frame (``sim/sensors.py``)."""
+    x, y, z = (float(v) for v in true_pose.translation)
+    return CameraEffectsMsg(
+        header=header(stamp_ns, frame_id),
+        stamp_written=time_msg(written_ns),
+        dropped=bool(dropped),
+        noise_phase=int(noise_phase),
+        exposure_scale=float(exposure_scale),
+        gain=float(gain),
+        true_pose=pose_msg(x, y, z, [float(q) for q in true_pose.quat()]),
     )
 
 

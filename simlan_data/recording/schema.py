@@ -51,6 +51,7 @@ POSE_ARRAY_TYPE = "geometry_msgs/msg/PoseArray"
 MARKER_ARRAY_TYPE = "visualization_msgs/msg/MarkerArray"
 SAFETY_EVENT_TYPE = "simlan_msgs/msg/SafetyEvent"
 SAFETY_STATE_TYPE = "simlan_msgs/msg/SafetyState"
+CAMERA_EFFECTS_TYPE = "simlan_msgs/msg/CameraEffects"
 
 # ------------------------------------------------------------------------------------- topics
 CLOCK = "/clock"
@@ -146,6 +147,11 @@ def camera_topics(
         f"{base}/pose_landmarks",
         POSE_LANDMARKS_TYPE,
         "33 MediaPipe-style body landmarks of the person in the image (posemap.landmarks_rate_hz, or the drive's input)",
+    )
+    out["effects"] = Topic(
+        f"{base}/effects",
+        CAMERA_EFFECTS_TYPE,
+        "what the camera stage did to each frame: true exposure time, stamp written, lost or not, noise field, exposure, gain, true pose (runs with sensors other than ideal)",
     )
     out["detections"] = Topic(
         f"{base}/marker_detections",

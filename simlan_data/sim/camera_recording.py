@@ -100,8 +100,8 @@ class CameraRecorder:
         self._topics: dict[str, dict[str, schema.Topic]] = {}
         self._info: dict[str, bytes] = {}
         self._version: dict[str, int] = {}
-        self._cache: dict[tuple[str, str], tuple[int, Any, Any]] = {}
-        self._encoders: dict[tuple[str, str], Callable[[Any], tuple[Any, ...]] | None] = {}
+        self._cache: dict[tuple[str, str, int], tuple[int, Any, Any]] = {}
+        self._encoders: dict[tuple[str, str, int], Callable[[Any], tuple[Any, ...]] | None] = {}
         self.encoded = 0
 
     def topics(self, camera_id: str) -> dict[str, schema.Topic]:
@@ -118,13 +118,15 @@ class CameraRecorder:
             self._topics[camera_id] = topics
         return self._topics[camera_id]
 
-    def _encoder(self, stream: str) -> Callable[[Any], tuple[Any, ...]] | None:
-        """A new encoder for one camera's ``stream`` (None: recorded raw)."""
+    def _encoder(self, stream: str, phase: int = -1) -> Callable[[Any], tuple[Any, ...]] | None:
+        """A new encoder for one camera's ``stream`` (None: recorded raw); ``phase`` >= 0: colour
+        images with sensor noise, which are not decoded to grey at once (most of them are never
+        searched whole; a region search decodes only its regions from the JPEG)."""
         rec = self.rec
         if stream == "rgb":
             if rec.rgb_encoding == "raw":
                 return None
-            decode = self.decode_gray
+            decode = self.decode_gray and phase < 0
             encode = RgbStream(rec.rgb_encoding, jpeg_quality=rec.jpeg_quality)
 
             def rgb(a: Any) -> EncodedRgb:
@@ -142,11 +144,25 @@ class CameraRecorder:
             return None if rec.depth_encoding in RAW_DEPTH else DepthStream()
         return None if rec.semantic_encoding == "raw" else encode_labels
 
-    def record(self, t: int, frame_index: int, camera: CameraModel, images: CameraImages) -> Any:
-        """Queue one camera frame; returns the future of the colour image's EncodedRgb, or None."""
+    def record(
+        self,
+        t: int,
+        frame_index: int,
+        camera: CameraModel,
+        images: CameraImages,
+        *,
+        stamp_ns: int | None = None,
+        phase: int = -1,
+    ) -> Any:
+        """Queue one camera frame; returns the future of the colour image's EncodedRgb, or None.
+
+        ``stamp_ns``: the simulated time the camera writes in the headers (its own clock, default
+        ``t``); ``phase``: the sensor noise field the colour image carries (``sim/sensors.py``):
+        each phase has its own colour encoder, so an unchanged scene re-encodes only the rows that
+        changed since that phase's last frame."""
         cid, frame = camera.camera_id, camera.frame_id
         topics = self.topics(cid)
-        stamp = self.writer.stamp_ns(t)  # header stamps: bag time (recording/timebase.py)
+        stamp = self.writer.stamp_ns(t if stamp_ns is None else stamp_ns)  # header: bag time (timebase.py)
         if cid not in self._info:
             self._info[cid] = self.writer.serialize(topics["camera_info"], M.camera_info(0, camera))
         self.writer.write_serialized(topics["camera_info"], t, M.restamp(self._info[cid], stamp))
@@ -159,7 +175,7 @@ class CameraRecorder:
             arrays["semantic"] = images.labels
         rgb_encoded = None
         for stream, array in arrays.items():
-            topic, key = topics[stream], (cid, stream)
+            topic, key = topics[stream], (cid, stream, phase if stream == "rgb" else -1)
             cached = self._cache.get(key)
             if cached is not None and cached[0] == version:
                 _, encoded, pending = cached
@@ -167,7 +183,7 @@ class CameraRecorder:
             else:
                 assert array is not None  # (the streams recorded are the streams rendered)
                 if key not in self._encoders:
-                    self._encoders[key] = self._encoder(stream)
+                    self._encoders[key] = self._encoder(stream, key[2])
                 encode = self._encoders[key]
                 if encode is None:
                     encoded = None

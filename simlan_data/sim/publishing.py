@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -18,6 +19,7 @@ from simlan_data.recording import messages as M
 from simlan_data.recording import schema
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.sim.agents import Agent, CollisionReading
+from simlan_data.sim.sensors import CameraSensor, Capture
 from simlan_data.world.labels import SEMANTIC_CLASSES
 
 DEPENDENCIES = (
@@ -113,16 +115,42 @@ class Publisher:
         ]
         self.writer.write(global_topic(schema.GROUND_TRUTH_POSES), t, M.tf_message(poses))
 
-    def detections(self, t: int, camera: CameraModel, detections: list[Detection], mode: str) -> None:
+    def detections(
+        self,
+        t: int,
+        camera: CameraModel,
+        detections: list[Detection],
+        mode: str,
+        *,
+        stamp_ns: int | None = None,
+    ) -> None:
+        """The markers found in a camera's image; ``stamp_ns``: the image's stamp (its camera's clock)."""
         topic = schema.camera_topics(camera.camera_id, rgb="jpeg", depth=None, semantic=None)["detections"]
         corners = [d.corners_px for d in detections]
+        header_ns = self.writer.stamp_ns(t if stamp_ns is None else stamp_ns)
         self.writer.write(
             topic,
             t,
-            M.marker_detections(
-                self.writer.stamp_ns(t), camera.frame_id, [d.marker_id for d in detections], corners, mode
-            ),
+            M.marker_detections(header_ns, camera.frame_id, [d.marker_id for d in detections], corners, mode),
         )
+
+    def camera_effects(self, t: int, camera: CameraModel, shot: Capture, sensor: CameraSensor) -> None:
+        """What the camera stage did to this frame (only when sensors are not ideal)."""
+        if not sensor.cfg.active:
+            return
+        topic = schema.camera_topics(camera.camera_id, rgb="jpeg", depth=None, semantic=None)["effects"]
+        build = functools.partial(
+            M.camera_effects,
+            self.writer.stamp_ns(t),
+            camera.frame_id,
+            self.writer.stamp_ns(shot.stamp_ns),
+            dropped=shot.dropped,
+            noise_phase=shot.noise_phase,
+            exposure_scale=shot.exposure_scale,
+            gain=shot.gain,
+            true_pose=sensor.true_camera.world_from_camera,
+        )
+        self.writer.submit(topic, t, build)  # built and serialized on a worker thread
 
     def command(self, t: int, ns: str, v: float, w: float, collision: CollisionReading) -> None:
         topics, frame, stamp = self.topics[ns], schema.base_link_frame(ns), self.writer.stamp_ns(t)

@@ -27,6 +27,7 @@ from simlan_data.sim.dynamic_layer import MovedAgents, StaticMeshes
 from simlan_data.sim.posemap_drive import DriveInputs, load_drive_inputs
 from simlan_data.sim.pybullet_client import Client, connect
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.sim.sensors import drifted
 from simlan_data.sim.urdf_check import check_urdf
 from simlan_data.world._pybullet import pb
 from simlan_data.world.agent_types import AgentType, agent_type
@@ -213,7 +214,7 @@ class Scene:
         renderers = [
             CameraRenderer(
                 client,
-                cam,
+                drifted(cam, cfg.sensors.drift, cfg.seed),  # drawn from where it truly hangs
                 labels,
                 distort=cam_cfg.distortion,
                 near_m=cam_cfg.near_m,

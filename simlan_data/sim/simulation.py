@@ -50,6 +50,7 @@ from simlan_data.sim.posemap_drive import PoseDriver, make_driver
 from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.sim.scene import Inputs, Scene
+from simlan_data.sim.sensors import CameraSensor
 from simlan_data.world._pybullet import pb
 
 
@@ -65,6 +66,7 @@ class RunStats:
     physics_steps: int = 0
     camera_frames: int = 0
     camera_frames_changed: int = 0
+    camera_frames_dropped: int = 0  # lost by the camera stage (sensors.timing.drop_rate)
     render_wall_s: float = 0.0
     localize_wall_s: float = 0.0
     renderer: str = ""
@@ -91,6 +93,7 @@ class RunStats:
             "sim.physics_steps": float(self.physics_steps),
             "sim.camera_frames": float(self.camera_frames),
             "sim.camera_frames_changed": float(self.camera_frames_changed),
+            "sim.camera_frames_dropped": float(self.camera_frames_dropped),
             "sim.render_wall_s": self.render_wall_s,
             "sim.localize_wall_s": self.localize_wall_s,
             "agents.collisions": float(sum(self.collisions.values())),
@@ -341,7 +344,8 @@ class Simulation:
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
         driver = make_driver(cfg, scene.agents, writer, self.inputs.posemap)  # motion files or the drive
-        return _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy)
+        sensors = [CameraSensor(cfg.sensors, cfg.seed, cam) for cam in scene.cameras]
+        return _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
 
     def _camera_tick(self, run: _Run, step: int, t: int) -> None:
         """Render and record every camera, then localize and detect people on the frames."""
@@ -353,24 +357,35 @@ class Simulation:
         run.stats.localize_wall_s += time.perf_counter() - loc0
 
     def _render(self, run: _Run, step: int, t: int) -> list[_Frame]:
-        """Render, record and start searching each camera; feed the bird's-eye stitcher and the driver."""
+        """Render, pass through the camera stage, record and start searching each camera; feed the
+        bird's-eye stitcher and the driver."""
         scene, stats, stack = run.scene, run.stats, run.stack
         scene.refresh_static_layers()
         moved = scene.moved_boxes()
         frames = []
-        for renderer in scene.renderers:
-            camera = renderer.camera
+        index = step // self.camera_every
+        for renderer, camera, sensor in zip(scene.renderers, scene.cameras, run.sensors, strict=True):
             images = renderer.render(moved)
             stats.camera_frames += 1
             stats.camera_frames_changed += int(images.changed)
-            encoded = run.recorder.record(t, step // self.camera_every, camera, images)
-            plan = stack.search_plan(t, camera.camera_id)
-            search = None if plan is None else self._search(stack, run.writer, camera, plan, images, encoded)
-            frames.append(_Frame(camera, images, plan, search, encoded))
-        if self.birdseye is not None:
-            self.birdseye.tick(t, step // self.camera_every, [f.images for f in frames])
+            shot = sensor.capture(t, index, images)
+            run.pub.camera_effects(t, camera, shot, sensor)
+            if shot.dropped:
+                stats.camera_frames_dropped += 1
+                continue
+            run.delivered[camera.camera_id] = shot.images
+            encoded = run.recorder.record(
+                t, index, camera, shot.images, stamp_ns=shot.stamp_ns, phase=shot.noise_phase
+            )
+            plan = stack.search_plan(shot.stamp_ns, camera.camera_id)
+            search = (
+                None if plan is None else self._search(stack, run.writer, camera, plan, shot.images, encoded)
+            )
+            frames.append(_Frame(camera, shot.images, plan, search, encoded, shot.stamp_ns))
+        if self.birdseye is not None:  # a lost frame: the stitcher keeps the camera's last image
+            self.birdseye.tick(t, index, [run.delivered[c.camera_id] for c in scene.cameras])
         if run.driver is not None:
-            run.driver.camera_tick(t, step // self.camera_every, [(f.camera, f.images) for f in frames])
+            run.driver.camera_tick(t, index, [(f.camera, f.images) for f in frames])
         return frames
 
     def _localize(self, run: _Run, t: int, frames: list[_Frame]) -> None:
@@ -380,10 +395,10 @@ class Simulation:
             camera = f.camera
             if f.plan is not None and f.search is not None:
                 found = f.search.result()
-                mode = stack.camera_detections(t, camera.camera_id, f.plan, found)
-                pub.detections(t, camera, found.detections, mode)
+                mode = stack.camera_detections(f.stamp_ns, camera.camera_id, f.plan, found)
+                pub.detections(t, camera, found.detections, mode, stamp_ns=f.stamp_ns)
             elif stack.wants_frames(camera.camera_id):
-                stack.camera_image(self._frame(t, camera.camera_id, f.images, f.encoded))
+                stack.camera_image(self._frame(f.stamp_ns, camera.camera_id, f.images, f.encoded))
             stack.people_frame(camera.camera_id, f.images.labels)
         stack.close_camera_tick(t)
         if stack.last_people is not None:
@@ -448,6 +463,7 @@ class _Frame:
     plan: str | list | None
     search: Future[ImageSearch] | None
     encoded: Any
+    stamp_ns: int  # the stamp the camera wrote (its clock: sensors.timing)
 
 
 @dataclass
@@ -463,3 +479,5 @@ class _Run:
     driver: PoseDriver | None
     in_contact: dict[str, bool]
     last_xy: dict[str, np.ndarray]
+    sensors: list[CameraSensor]  # the camera stage, per camera (sensors: ideal passes images through)
+    delivered: dict[str, CameraImages]  # per camera, the last frame that was not lost

@@ -1,0 +1,111 @@
+"""Benchmark: what realistic cameras cost (issue 24): the default run with every effect on beside
+the same run without, measured alternately, back to back.
+
+    python benchmarks/sensors_cost.py [--repeats 3] [--duration 60] [--json FILE]
+
+Variants, interleaved in every repeat: ``sensors=ideal`` (the baseline), ``sensors=realistic``
+(every effect at its default strength), and each effect group alone (photometric, timing,
+drift), so a cost can be put where it is. Per run: the real-time factor (``sim.rtf``) and the
+CPU time of the run's process per simulated second (user + system; it moves less with whatever
+else the machine runs); medians over the repeats. The issue's target: realistic at most 15 %
+slower than ideal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import resource
+import statistics
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import REPO, machine, run_cli, table
+
+VARIANTS = {
+    "ideal": ["sensors=ideal"],
+    "realistic": ["sensors=realistic"],
+    "photometric": ["sensors=realistic", "sensors.timing.enabled=false", "sensors.drift.enabled=false"],
+    "timing": ["sensors=realistic", "sensors.photometric.enabled=false", "sensors.drift.enabled=false"],
+    "drift": ["sensors=realistic", "sensors.photometric.enabled=false", "sensors.timing.enabled=false"],
+}
+
+
+def one(out: Path, name: str, duration: float) -> dict[str, float]:
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = run_cli(f"duration_s={duration:g}", "progress=false", *VARIANTS[name], f"hydra.run.dir={out}")
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        raise SystemExit(proc.stderr)
+    metrics = json.loads((out / "metrics.json").read_text())
+    cpu_s = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {
+        "rtf": metrics["sim.rtf"],
+        "cpu_s_per_s": cpu_s / duration,
+        "mib": (out / "recording" / "recording.mcap").stat().st_size / 2**20,
+        "ate_cm": 100 * metrics.get("localization.ate_xy_rmse_m", float("nan")),
+    }
+
+
+def summary(results: dict[str, list[dict[str, float]]]) -> dict[str, dict[str, float]]:
+    base = statistics.median(r["rtf"] for r in results["ideal"])
+    out = {}
+    for name, rows in results.items():
+        rtf = statistics.median(r["rtf"] for r in rows)
+        out[name] = {
+            "rtf": round(rtf, 3),
+            "slower_pct": round(100 * (base / rtf - 1), 1),
+            "cpu_s_per_s": round(statistics.median(r["cpu_s_per_s"] for r in rows), 3),
+            "mib": round(statistics.median(r["mib"] for r in rows), 1),
+            "ate_cm": round(statistics.median(r["ate_cm"] for r in rows), 3),
+        }
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--duration", type=float, default=60.0)
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    names = args.variants.split(",")
+    results: dict[str, list[dict[str, float]]] = {n: [] for n in names}
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(args.repeats):
+            for name in names:
+                r = one(Path(tmp) / f"{name}_{i}", name, args.duration)
+                results[name].append(r)
+                print(f"  {name} #{i}: RTF {r['rtf']:.2f}, CPU {r['cpu_s_per_s']:.3f} s/s", file=sys.stderr)
+    table_ = summary(results)
+    print(table(["variant", "RTF", "slower than ideal", "CPU s per s", "MiB", "ATE cm"],
+                [[n, t["rtf"], f"{t['slower_pct']} %", t["cpu_s_per_s"], t["mib"], t["ate_cm"]]
+                 for n, t in table_.items()]))  # fmt: skip
+    real = table_.get("realistic")
+    figures = []
+    if real is not None:
+        figures.append({
+            "id": "sensors_cost", "figure": f"default run ({args.duration:g} s, 11 cameras 960x540) with sensors=realistic: RTF",
+            "value": real["rtf"], "unit": "x", "target": "<= 15 % slower than sensors=ideal",
+            "baseline": f"sensors=ideal: RTF {table_['ideal']['rtf']} (same run, alternately)",
+            "note": f"{real['slower_pct']} % slower; " + ", ".join(
+                f"{n} alone {t['slower_pct']} %" for n, t in table_.items() if n not in ("ideal", "realistic")),
+        })  # fmt: skip
+    result = {
+        "command": f"python benchmarks/sensors_cost.py --repeats {args.repeats} --duration {args.duration:g} --json FILE",
+        "machine": machine(),
+        "date": datetime.date.today().isoformat(),
+        "history": "docs/sensors.md",
+        "summary": table_,
+        "runs": results,
+        "figures": figures,
+    }
+    path = args.json or REPO / "benchmarks" / "results" / f"sensors_cost_{result['date']}.json"
+    path.write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,120 @@
+"""The ``sensors`` section: cameras as imperfect as real ones (issue 24; docs/sensors.md).
+
+Everything is off by default (``sensors=ideal``); ``sensors=realistic`` turns every effect on at
+the defaults of a real camera. Each effect is seeded by (run seed, camera id) and what it did is
+recorded per frame on ``/camera_<id>/effects``:
+
+- ``photometric``: shot noise, read noise, ADC quantization, analog gain, exposure, vignetting
+  (``imaging/sensor_model.py``), applied to the rendered colour image before it is encoded;
+- ``timing``: each camera's clock offset (constant), per-frame stamp jitter and frame drops; the
+  header stamp is when the camera says it exposed, the effects topic says when it did;
+- ``drift``: the camera was bumped: the image is rendered from a perturbed true pose while the
+  recorded ``camera_info`` and ``/tf_static`` (and what the algorithms are given) stay the believed
+  calibration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from simlan_data.errors import ConfigError
+
+
+def _at_least(key: str, value: float, low: float, fix: str) -> None:
+    if not value >= low:
+        raise ConfigError.invalid(key, value, f"must be >= {low:g}", fix)
+
+
+@dataclass
+class PhotometricConfig:
+    """Sensor noise and exposure (``imaging/sensor_model.py``); defaults of ``sensors=realistic`` there."""
+
+    enabled: bool = False
+    full_well_e: float = 10000.0  # electrons at saturation (value 255 at gain 1, reference exposure)
+    read_noise_e: float = 2.5  # read noise, electrons RMS
+    gain: float = 1.0  # analog gain (1 = base ISO); brightness x gain, noise relative to signal x sqrt(gain)
+    exposure_scale: float = 1.0  # exposure time relative to the one at which the render's values hold
+    vignetting: float = 0.0  # illumination lost at the image corner (0..1), cos^4 falloff
+    adc_bits: int = 12  # raw quantization before the 8-bit output
+    gamma: float = 2.2  # the render is display-referred: noise is added in linear (electron) space
+    noise_phases: int = 8  # pre-drawn noise fields cycled frame by frame (0: fresh each frame, full cost)
+
+    def __post_init__(self) -> None:
+        for key in ("full_well_e", "gain", "exposure_scale", "gamma"):
+            value = getattr(self, key)
+            if not value > 0:
+                raise ConfigError.invalid(
+                    f"sensors.photometric.{key}", value, "must be > 0", "use the default"
+                )
+        _at_least("sensors.photometric.read_noise_e", self.read_noise_e, 0.0, "use 2.5")
+        if not 0.0 <= self.vignetting < 1.0:
+            raise ConfigError.invalid(
+                "sensors.photometric.vignetting",
+                self.vignetting,
+                "must be within 0..1 (1: a black corner)",
+                "use 0.3",
+            )
+        if not 8 <= self.adc_bits <= 16:
+            raise ConfigError.invalid(
+                "sensors.photometric.adc_bits", self.adc_bits, "must be within 8..16", "use 12"
+            )
+        _at_least(
+            "sensors.photometric.noise_phases", self.noise_phases, 0, "use 8 (0: fresh noise every frame)"
+        )
+
+
+@dataclass
+class TimingConfig:
+    """Camera clocks and frame delivery."""
+
+    enabled: bool = False
+    clock_offset_s: float = (
+        0.0  # standard deviation of each camera's constant clock offset (seeded per camera)
+    )
+    clock_jitter_s: float = 0.0  # standard deviation of the per-frame stamp jitter
+    drop_rate: float = 0.0  # probability that a frame is lost (not recorded, never reaches an algorithm)
+
+    def __post_init__(self) -> None:
+        _at_least("sensors.timing.clock_offset_s", self.clock_offset_s, 0.0, "use 0.005")
+        _at_least("sensors.timing.clock_jitter_s", self.clock_jitter_s, 0.0, "use 0.001")
+        if not 0.0 <= self.drop_rate < 1.0:
+            raise ConfigError.invalid(
+                "sensors.timing.drop_rate",
+                self.drop_rate,
+                "must be within 0..1 (1 would drop every frame)",
+                "use 0.01",
+            )
+
+
+@dataclass
+class DriftConfig:
+    """A bumped camera: the true pose differs from the calibration the recording and algorithms hold."""
+
+    enabled: bool = False
+    position_m: float = 0.0  # standard deviation per axis of the true camera position's offset
+    rotation_deg: float = 0.0  # standard deviation per axis of the true camera orientation's offset
+
+    def __post_init__(self) -> None:
+        _at_least("sensors.drift.position_m", self.position_m, 0.0, "use 0.003")
+        _at_least("sensors.drift.rotation_deg", self.rotation_deg, 0.0, "use 0.2")
+        if self.position_m > 1.0 or self.rotation_deg > 30.0:
+            raise ConfigError.invalid(
+                "sensors.drift",
+                f"position_m={self.position_m}, rotation_deg={self.rotation_deg}",
+                "a drift is a bump (a few mm, tenths of a degree), at most 1 m and 30 degrees",
+                "use position_m=0.003 rotation_deg=0.2",
+            )
+
+
+@dataclass
+class SensorsConfig:
+    """Realistic cameras: ``sensors=realistic`` (every effect on) or ``sensors=ideal`` (none, the default)."""
+
+    name: str = "ideal"
+    photometric: PhotometricConfig = field(default_factory=PhotometricConfig)
+    timing: TimingConfig = field(default_factory=TimingConfig)
+    drift: DriftConfig = field(default_factory=DriftConfig)
+
+    @property
+    def active(self) -> bool:
+        return self.photometric.enabled or self.timing.enabled or self.drift.enabled

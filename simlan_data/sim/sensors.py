@@ -1,0 +1,104 @@
+"""The camera stage after rendering: what a real camera makes of the ideal render (issue 24).
+
+Per camera, seeded by (run seed, camera id) through ``seeding.run_rng`` (one stream per effect, so
+turning one effect on or off leaves the others' draws alone):
+
+- **drift**: the true camera pose is the believed (recorded) one moved by a small random rotation
+  about the camera centre and a translation (``DriftConfig``); the renderer draws from the true
+  pose, everything recorded and every algorithm keeps the believed one;
+- **timing**: a constant clock offset per camera and a jitter per frame on the stamp the camera
+  writes (the header stamp: when the camera *says* it exposed); a frame is lost with
+  ``drop_rate`` (nothing recorded, nothing reaches an algorithm);
+- **photometric**: ``imaging.sensor_model.SensorModel`` on the colour image (noise, gain,
+  exposure, vignetting, quantization).
+
+What was done is one ``simlan_msgs/CameraEffects`` per camera frame on ``/camera_<id>/effects``
+(recorded for dropped frames too): the true exposure time, the stamp written, the noise field
+used, exposure and gain, the true pose. Replay reads the stamps back from the image headers, so it
+gives the algorithms what the live run gave them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from simlan_data.config.sensors import DriftConfig, SensorsConfig
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.geometry.transforms import Transform, quat_from_rpy
+from simlan_data.imaging.sensor_model import PhotometricParams, SensorModel
+from simlan_data.seeding import run_rng
+from simlan_data.sim.rendering import CameraImages
+
+
+def drifted(camera: CameraModel, drift: DriftConfig, seed: int) -> CameraModel:
+    """``camera`` as it truly hangs after a bump: rotated about its centre and moved (map frame)."""
+    if not drift.enabled or (drift.position_m == 0.0 and drift.rotation_deg == 0.0):
+        return camera
+    rng = run_rng(seed, "camera_drift", camera.camera_id)
+    rpy = np.radians(rng.normal(0.0, drift.rotation_deg, 3))
+    shift = rng.normal(0.0, drift.position_m, 3)
+    world_from_cam = camera.world_from_camera
+    centre = world_from_cam.translation
+    bump = Transform.from_quat(np.zeros(3), quat_from_rpy(*rpy))  # about the camera centre, map axes
+    true_world_from_cam = Transform(bump.rotation @ world_from_cam.rotation, centre + shift, None)
+    return replace(camera, camera_from_world=true_world_from_cam.inverse())
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One camera frame after the camera stage."""
+
+    images: CameraImages  # what the camera delivers (the colour image with the sensor's effects)
+    stamp_ns: int  # simulated time the camera writes in the header (its clock)
+    dropped: bool  # lost: nothing recorded, no algorithm sees it
+    noise_phase: int  # which pre-drawn noise field the colour image carries (-1: none)
+    exposure_scale: float
+    gain: float
+
+
+class CameraSensor:
+    """The camera stage of one camera (``capture`` once per rendered frame, in frame order)."""
+
+    def __init__(self, cfg: SensorsConfig, seed: int, believed: CameraModel) -> None:
+        cid = believed.camera_id
+        self.cfg, self.believed = cfg, believed
+        self.true_camera = drifted(believed, cfg.drift, seed)
+        p, t = cfg.photometric, cfg.timing
+        self.model: SensorModel | None = None
+        if p.enabled:
+            params = PhotometricParams(
+                full_well_e=p.full_well_e,
+                read_noise_e=p.read_noise_e,
+                gain=p.gain,
+                exposure_scale=p.exposure_scale,
+                vignetting=p.vignetting,
+                adc_bits=p.adc_bits,
+                gamma=p.gamma,
+                noise_phases=p.noise_phases,
+            )
+            self.model = SensorModel(params, self.true_camera, run_rng(seed, "camera_noise", cid))
+        self.offset_ns = 0
+        if t.enabled and t.clock_offset_s > 0:
+            self.offset_ns = round(
+                float(run_rng(seed, "camera_clock", cid).normal(0.0, t.clock_offset_s)) * 1e9
+            )
+        self._frames = run_rng(seed, "camera_frames", cid)  # jitter and drops, one draw of each per frame
+
+    def capture(self, t_ns: int, frame_index: int, images: CameraImages) -> Capture:
+        t, p = self.cfg.timing, self.cfg.photometric
+        jitter, lost = self._frames.normal(0.0, 1.0), self._frames.random()
+        stamp = t_ns
+        dropped = False
+        if t.enabled:
+            stamp = t_ns + self.offset_ns + round(jitter * t.clock_jitter_s * 1e9)
+            dropped = bool(lost < t.drop_rate)
+        phase = -1
+        if self.model is not None and images.rgb is not None and not dropped:
+            rgb = self.model.apply(images.rgb, frame_index)
+            phase = self.model.phase(frame_index)
+            # ``changed`` stays the render's: an unchanged scene in the same noise phase gives the
+            # same image, so the recorder reuses that phase's encoding (and depth, labels as ever)
+            images = replace(images, rgb=rgb)
+        return Capture(images, stamp, dropped, phase, p.exposure_scale, p.gain)
