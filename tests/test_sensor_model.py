@@ -12,6 +12,8 @@ import pytest
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.imaging.sensor_model import (
+    NOISE_SCALE,
+    NoiseBank,
     PhotometricParams,
     SensorModel,
     realistic_defaults,
@@ -184,3 +186,27 @@ def test_parameters_and_inputs_are_checked(camera) -> None:
         replace(defaults, vignetting=1.0)
     with pytest.raises(ValueError, match="shape"):
         model(camera, CLEAN).apply(np.zeros((H, W), np.uint8), 0)
+
+
+def test_a_shared_noise_bank_gives_each_camera_its_own_fields_as_views_and_seeded(camera) -> None:
+    shape = (camera.height, camera.width, 3)
+    bank = NoiseBank(np.random.default_rng(1), shape, fields=16)
+    a = bank.fields_for(run_rng(0, "camera_noise", "160"), 8, shape)
+    b = bank.fields_for(run_rng(0, "camera_noise", "161"), 8, shape)
+    again = bank.fields_for(run_rng(0, "camera_noise", "160"), 8, shape)
+    assert len(a) == 8 and all(f.shape == shape and f.flags.c_contiguous for f in a)
+    assert all(np.shares_memory(f, g) for f, g in zip(a, again, strict=True))  # seeded: the same views
+    assert all(np.array_equal(f, g) for f, g in zip(a, again, strict=True))
+    assert any(not np.array_equal(f, g) for f, g in zip(a, b, strict=True))  # another camera, other noise
+    z = np.concatenate([f.ravel()[::97] for f in a]).astype(float) / NOISE_SCALE
+    assert abs(z.mean()) < 0.01 and abs(z.std() - 1.0) < 0.01  # standard normal
+    # a model on the bank is exact and cached like one that draws its own fields
+    params = realistic_defaults()
+    m1 = SensorModel(params, camera, run_rng(0, "camera_noise", "160"), bank=bank)
+    m2 = SensorModel(params, camera, run_rng(0, "camera_noise", "160"), bank=bank)
+    img = flat(120)
+    out = [m1.apply(img, i) for i in range(10)]
+    assert all(np.array_equal(o, m2.apply(img, i)) for i, o in enumerate(out))
+    assert not np.array_equal(out[0], out[1])  # frame to frame the noise changes
+    with pytest.raises(ValueError, match="holds 16 fields, 20 asked"):
+        bank.fields_for(run_rng(0, "x"), 20, shape)

@@ -189,10 +189,61 @@ class _Phase:
     settings: tuple[float, float] | None = None  # (exposure_scale, gain) the output was made with
 
 
+def draw_noise_field(rng: np.random.Generator, shape: tuple[int, ...]) -> NDArray[np.int8]:
+    """A standard normal field stored as int8 (``NOISE_SCALE`` per sigma)."""
+    z = rng.standard_normal(shape, dtype=np.float32)
+    z *= NOISE_SCALE
+    np.rint(z, out=z)
+    np.clip(z, -127, 127, out=z)
+    return z.astype(np.int8)
+
+
+class NoiseBank:
+    """Noise fields drawn once per run and shared by its cameras.
+
+    Drawing the fields is most of a model's construction (about 20 ms per 960x540 field, 8 per
+    camera: 1.8 s for the 11 GPSS cameras, a tenth of a 60 s run's wall time). A bank holds
+    ``fields`` fields ``extra_rows`` taller than the images; each camera takes, from its own seeded
+    stream, a random choice of them and a random row offset into each (views, no copies). So two
+    cameras' noise at the same frame is either from different fields or the same field shifted by
+    whole rows: independent per pixel, but a shifted copy. Nothing here reads across cameras' noise
+    (every algorithm looks at one image at a time); an analysis that does should use one model
+    per camera without a bank.
+    """
+
+    def __init__(
+        self, rng: np.random.Generator, shape: tuple[int, ...], *, fields: int, extra_rows: int = 64
+    ) -> None:
+        self.shape, self.extra_rows = tuple(shape), extra_rows
+        tall = (shape[0] + extra_rows, *shape[1:])
+        self._fields = [draw_noise_field(rng, tall) for _ in range(fields)]
+
+    def fields_for(
+        self, rng: np.random.Generator, phases: int, shape: tuple[int, ...]
+    ) -> list[NDArray[np.int8]]:
+        """``phases`` fields for one camera (``rng``: the camera's own stream)."""
+        if tuple(shape) != self.shape:
+            raise ValueError(f"the bank's fields are {self.shape}, the camera's images {tuple(shape)}")
+        if phases > len(self._fields):
+            raise ValueError(f"the bank holds {len(self._fields)} fields, {phases} asked")
+        order = rng.permutation(len(self._fields))[:phases]
+        rows = rng.integers(0, self.extra_rows + 1, size=phases)
+        return [self._fields[int(k)][int(r) : int(r) + shape[0]] for k, r in zip(order, rows, strict=True)]
+
+
 class SensorModel:
     """The photometric sensor of one camera (module docstring: physics, cost, determinism)."""
 
-    def __init__(self, params: PhotometricParams, camera: LensCamera, rng: np.random.Generator) -> None:
+    def __init__(
+        self,
+        params: PhotometricParams,
+        camera: LensCamera,
+        rng: np.random.Generator,
+        *,
+        bank: NoiseBank | None = None,
+    ) -> None:
+        """``bank``: take the noise fields from a bank shared by the run's cameras (``NoiseBank``)
+        instead of drawing them (``rng`` then picks which fields and where)."""
         self.params = params
         self.shape = (camera.height, camera.width, 3)
         vmap = vignetting_map(camera, params.vignetting)
@@ -203,19 +254,18 @@ class SensorModel:
         codes = np.arange(2**params.adc_bits, dtype=np.float64) / self._qmax
         self._out_lut = np.rint(255.0 * codes ** (1.0 / params.gamma)).astype(np.uint8)
         self._linear = (np.arange(256, dtype=np.float64) / 255.0) ** params.gamma
-        self._phases = [
-            _Phase(self._draw_field(rng), np.ones(camera.height, bool)) for _ in range(params.noise_phases)
-        ]
+        fields = (
+            bank.fields_for(rng, params.noise_phases, self.shape)
+            if bank is not None
+            else [self._draw_field(rng) for _ in range(params.noise_phases)]
+        )
+        self._phases = [_Phase(field, np.ones(camera.height, bool)) for field in fields]
         self._fresh_key = int(rng.integers(2**63))  # noise_phases == 0: frame noise keyed by index
         self._last_input: NDArray[np.uint8] | None = None
 
     def _draw_field(self, rng: np.random.Generator) -> NDArray[np.int8]:
-        """One noise phase: standard normal values stored as int8 (``NOISE_SCALE`` per sigma)."""
-        z = rng.standard_normal(self.shape, dtype=np.float32)
-        z *= NOISE_SCALE
-        np.rint(z, out=z)
-        np.clip(z, -127, 127, out=z)
-        return z.astype(np.int8)
+        """One noise phase of this camera alone."""
+        return draw_noise_field(rng, self.shape)
 
     def phase(self, frame_index: int) -> int:
         """The noise field frame ``frame_index`` uses (-1 with fresh noise per frame)."""

@@ -27,7 +27,7 @@ import numpy as np
 from simlan_data.config.sensors import DriftConfig, SensorsConfig
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.transforms import Transform, quat_from_rpy
-from simlan_data.imaging.sensor_model import PhotometricParams, SensorModel
+from simlan_data.imaging.sensor_model import NoiseBank, PhotometricParams, SensorModel
 from simlan_data.seeding import run_rng
 from simlan_data.sim.rendering import CameraImages
 
@@ -46,6 +46,24 @@ def drifted(camera: CameraModel, drift: DriftConfig, seed: int) -> CameraModel:
     return replace(camera, camera_from_world=true_world_from_cam.inverse())
 
 
+def camera_sensors(cfg: SensorsConfig, seed: int, cameras: list[CameraModel]) -> list[CameraSensor]:
+    """The camera stage of every camera of a run; cameras of one image size share a noise bank
+    (twice the fields one camera uses: the draw is paid once per run, not per camera)."""
+    banks: dict[tuple[int, int], NoiseBank] = {}
+    phases = cfg.photometric.noise_phases
+    out = []
+    for cam in cameras:
+        bank = None
+        if cfg.photometric.enabled and phases > 0:
+            size = (cam.height, cam.width)
+            if size not in banks:
+                rng = run_rng(seed, "camera_noise_bank", f"{cam.width}x{cam.height}")
+                banks[size] = NoiseBank(rng, (cam.height, cam.width, 3), fields=2 * phases)
+            bank = banks[size]
+        out.append(CameraSensor(cfg, seed, cam, bank))
+    return out
+
+
 @dataclass(frozen=True)
 class Capture:
     """One camera frame after the camera stage."""
@@ -61,7 +79,9 @@ class Capture:
 class CameraSensor:
     """The camera stage of one camera (``capture`` once per rendered frame, in frame order)."""
 
-    def __init__(self, cfg: SensorsConfig, seed: int, believed: CameraModel) -> None:
+    def __init__(
+        self, cfg: SensorsConfig, seed: int, believed: CameraModel, bank: NoiseBank | None = None
+    ) -> None:
         cid = believed.camera_id
         self.cfg, self.believed = cfg, believed
         self.true_camera = drifted(believed, cfg.drift, seed)
@@ -78,7 +98,8 @@ class CameraSensor:
                 gamma=p.gamma,
                 noise_phases=p.noise_phases,
             )
-            self.model = SensorModel(params, self.true_camera, run_rng(seed, "camera_noise", cid))
+            rng = run_rng(seed, "camera_noise", cid)
+            self.model = SensorModel(params, self.true_camera, rng, bank=bank)
         self.offset_ns = 0
         if t.enabled and t.clock_offset_s > 0:
             self.offset_ns = round(

@@ -50,7 +50,7 @@ from simlan_data.sim.posemap_drive import PoseDriver, make_driver
 from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.sim.scene import Inputs, Scene
-from simlan_data.sim.sensors import CameraSensor
+from simlan_data.sim.sensors import CameraSensor, camera_sensors
 from simlan_data.world._pybullet import pb
 
 
@@ -344,7 +344,7 @@ class Simulation:
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
         driver = make_driver(cfg, scene.agents, writer, self.inputs.posemap)  # motion files or the drive
-        sensors = [CameraSensor(cfg.sensors, cfg.seed, cam) for cam in scene.cameras]
+        sensors = camera_sensors(cfg.sensors, cfg.seed, scene.cameras)
         return _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
 
     def _camera_tick(self, run: _Run, step: int, t: int) -> None:
