@@ -3,6 +3,7 @@
     python -m simlan_data.evals base [--seeds N] [--reuse DIR] [--inject FAULT ...] [--accept] [--out DIR]
     python -m simlan_data.evals base --candidate algorithms/localizer=NAME [--candidate KEY=VALUE ...]
     python -m simlan_data.evals golden [--inject FAULT ...] [--accept] [--regenerate]
+    python -m simlan_data.evals robustness [--seeds N] [--only EFFECT ...] [--set KEY=VALUE ...]
     python -m simlan_data.evals --list
 
 Simulates every case and seed through Hydra's launcher (or reuses the runs of an earlier output),
@@ -18,6 +19,12 @@ candidate into ``OUT/candidate/``, and writes ``OUT/compare.md|parquet|csv``: pe
 metric both sides' intervals, the paired difference and a verdict (better, worse, no difference;
 :mod:`simlan_data.evaluation.compare`). Exit code 0: the comparison ran (whatever its verdict);
 1: a run or replay failed; 2: bad arguments.
+
+A robustness sweep (``robustness:`` in the suite file, :mod:`simlan_data.evaluation.robustness`)
+runs its scene under each effect at each strength over the seeds, through the same jobs, launcher
+and replays, and writes ``OUT/robustness.csv``, one plot per effect (``OUT/plots/``) and
+``OUT/robustness.md`` (where each metric's curve leaves its promise). Exit code 0: the sweep ran
+(whatever broke); 1: a run or replay failed; 2: bad arguments or a bad sweep (nothing written).
 """
 
 from __future__ import annotations
@@ -38,8 +45,12 @@ import polars as pl
 from simlan_data.apps.cli import run_cli
 from simlan_data.constants import CONF_DIR, EVALS_DIR, EVALS_OUTPUT_ROOT, METRICS_FILENAME, RECORDING_DIRNAME
 from simlan_data.errors import EXIT_FAILED_RUN, ConfigError, SimlanError
-from simlan_data.evaluation import replay_algorithms  # noqa: F401 - registers the algorithms
+from simlan_data.evaluation import (
+    replay_algorithms,  # noqa: F401 - registers the algorithms
+    robustness_report,
+)
 from simlan_data.evaluation.compare import compare_tables, print_comparison, suite_checks, write_comparison
+from simlan_data.evaluation.robustness import breaking_points, load_robustness, robustness_table, sweep_names
 from simlan_data.evaluation.suite import (
     FAILING,
     JOBS_FILE,
@@ -70,12 +81,18 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m simlan_data.evals",
         description="Run a V&V suite: simulate or reuse, replay, compare with bounds and baselines.",
     )
-    p.add_argument("suite", nargs="?", help="suite name in the suite file (base, golden, ...)")
+    p.add_argument(
+        "suite", nargs="?", help="suite or robustness sweep in the suite file (base, golden, robustness, ...)"
+    )
     p.add_argument("--file", type=Path, default=DEFAULT_FILE, help=f"suite file (default {DEFAULT_FILE})")
     p.add_argument("--list", action="store_true", help="list suites, cases and faults, and exit")
     p.add_argument("--seeds", type=int, help="seeds per case (0..N-1; default: the suite's)")
     p.add_argument(
-        "--only", nargs="+", default=[], metavar="CASE", help="run only these cases (or case families)"
+        "--only",
+        nargs="+",
+        default=[],
+        metavar="CASE",
+        help="run only these cases (or case families; of a robustness sweep: effects)",
     )
     p.add_argument(
         "--reuse", type=Path, metavar="DIR", help="reuse the runs of an earlier suite output (no simulation)"
@@ -129,6 +146,13 @@ def list_suite_file(path: Path) -> str:
             if c.faults is not None:
                 status += f"; faults acting: {', '.join(c.faults) or 'none'}"
             lines.append(f"  {name:<28} {status}")
+    for name in sweep_names(path):
+        sweep = load_robustness(path, name)
+        lines.append(
+            f"robustness sweep {name}: {len(sweep.suite.cases)} strengths x {len(sweep.suite.cases[0].seeds)} seeds"
+        )
+        for e in sweep.effects:
+            lines.append(f"  {e.name:<28} {e.key} = {', '.join(map(str, e.values))}")
     suite = load_suite(path, next(iter(doc.get("suites") or {})))
     lines.append("faults (--inject):")
     for f in suite.faults.values():
@@ -412,14 +436,77 @@ def _run_side(
     return table, failures
 
 
+# ------------------------------------------------------------------------- robustness sweep
+def run_robustness(args: argparse.Namespace) -> int:
+    """Every effect at every strength over the seeds, then the curves and where they break."""
+    for flag, on in (
+        ("--candidate", args.candidate),
+        ("--inject", args.inject),
+        ("--accept", args.accept),
+        ("--regenerate", args.regenerate),
+        ("--reuse", args.reuse),
+    ):
+        if on:
+            raise ConfigError(
+                f"{flag} with a robustness sweep",
+                "arguments",
+                "a sweep runs its effects; compare algorithms with --set on two sweeps",
+                f"drop {flag}",
+            )
+    sweep = load_robustness(args.file, args.suite, seeds=args.seeds, only=args.only)
+    _check_run_args(args)
+    cases = list(sweep.suite.cases)
+    with tempfile.TemporaryDirectory() as tmp:  # compose every run before anything is written
+        conf = Path(tmp) / "conf"
+        planned = plan_jobs(cases, Path(tmp) / "runs")
+        write_job_configs(sweep.suite, planned, conf)
+        check_jobs(planned, conf, list(args.set))
+    out = _out_dir(args)
+    jobs = plan_jobs(cases, out / "runs")
+    try:
+        simulate(sweep.suite, jobs, [], out, launcher=args.launcher, n_jobs=args.jobs, extra=list(args.set))
+    except SimlanError as err:
+        if isinstance(err, ConfigError):
+            shutil.rmtree(out, ignore_errors=True)
+            raise
+        print(err.line())  # every run failed: a result to report
+        for j in jobs:
+            j.error = j.error or err.line()
+    write_jobs_file(jobs, sweep.suite, [], out)
+    collect_run_metrics(jobs)
+    replay_all(jobs, [], out, n_jobs=args.jobs)
+    metrics = metrics_table(jobs)
+    metrics.write_csv(out / "metrics.csv", float_precision=9)
+    table = robustness_table(sweep, metrics)
+    verdicts = breaking_points(sweep, table)
+    failures = [
+        f"{j.case.name} seed {j.seed}: {source}: {error}"
+        for j in jobs
+        for source, error in sorted({**({"run": j.error} if j.error else {}), **j.errors}.items())
+    ]
+    csv = robustness_report.write_csv(out, table)
+    plots = robustness_report.plot_all(out, sweep, table, verdicts)
+    command = " ".join(["python -m simlan_data.evals", *args.argv])
+    report = robustness_report.write_report(out, sweep, verdicts, plots, command=command, failures=failures)
+    print()
+    robustness_report.print_summary(verdicts)
+    for f in failures:
+        print(f"FAILED {f}")
+    print(f"robustness: {report} (+ {csv.name}, {len(plots)} plots in {plots[0].parent if plots else out})")
+    return EXIT_FAILED_RUN if failures else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     if args.list:
         print(list_suite_file(args.file))
         return 0
     if not args.suite:
         parser.error("give a suite (e.g. base or golden) or --list")
+    if args.suite in sweep_names(args.file):
+        return run_robustness(args)
     if args.candidate:
         return run_compare(args)
     return run_suite(args)

@@ -31,6 +31,8 @@ Layout (every key is checked; a bad one is one error line naming the place)::
                                  # e.g. a case without the cameras a fault names)
             metrics: {SOURCE: {METRIC: {max, min, tolerance, rel_tolerance, better}}}
 
+    robustness:                  # robustness sweeps: simlan_data/evaluation/robustness.py
+
 SOURCE is ``run`` (the run's metrics.json) or a replay algorithm of the case. A requirement is
 ``replay:NAME`` (a registered replay algorithm), ``conf:GROUP/OPTION`` (a config file) or
 ``config:KEY.PATH`` (a key of the typed config); the case's replay algorithms and its
@@ -366,7 +368,7 @@ def load_suite(path: Path, name: str, *, seeds: int | None = None) -> Suite:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         raise _err(where, "suite file unreadable", first, "fix the YAML") from err
     doc = _mapping(doc, where)
-    _known_keys(doc, ("faults", "suites"), where)
+    _known_keys(doc, ("faults", "suites", "robustness"), where)  # robustness: evaluation.robustness
     suites = _mapping(doc.get("suites"), f"{where}: suites")
     if name not in suites:
         raise _err(where, f"unknown suite {name!r}", f"suites: {', '.join(suites) or '(none)'}", "pick one")
