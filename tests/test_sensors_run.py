@@ -137,6 +137,8 @@ def test_replay_reproduces_the_live_run_under_every_effect(runs: dict[str, Path]
         ("sensors.timing.drop_rate=1.5", "sensors.timing.drop_rate"),
         ("sensors.photometric.vignetting=-0.2", "sensors.photometric.vignetting"),
         ("sensors.drift.rotation_deg=45", "sensors.drift"),
+        ("sensors.photometric.lighting=[[2.0,-1.0]]", "sensors.photometric.lighting"),
+        ("sensors.photometric.lighting=[[5.0,0.5],[2.0,0.25]]", "sensors.photometric.lighting"),
     ],
 )
 def test_a_bad_sensor_setting_is_refused_in_one_line_and_nothing_is_written(
@@ -147,3 +149,57 @@ def test_a_bad_sensor_setting_is_refused_in_one_line_and_nothing_is_written(
     lines = [x for x in proc.stderr.strip().splitlines() if x.strip()]
     assert len(lines) == 1 and field in lines[0], proc.stderr
     assert not (tmp_path / "run").exists()
+
+
+@pytest.fixture(scope="module")
+def dimmed(tmp_path_factory: pytest.TempPathFactory) -> dict[bool, Path]:
+    """The light drops to 1/8 at 1 s (camera 163 alone), with and without auto-exposure."""
+
+    def make(root: Path) -> None:
+        for ae in (True, False):
+            proc = run_cli(
+                "duration_s=4",
+                "progress=false",
+                "cameras.ids=[163]",
+                "cameras.streams=[rgb]",
+                "sensors=realistic",
+                "sensors.timing.enabled=false",
+                "sensors.photometric.lighting=[[1.0,0.125]]",
+                f"sensors.photometric.auto_exposure={str(ae).lower()}",
+                f"hydra.run.dir={root / str(ae)}",
+            )
+            assert proc.returncode == 0, proc.stderr
+
+    root = made_once(tmp_path_factory, "sensor_dimmed", make)
+    return {True: root / "True", False: root / "False"}
+
+
+def brightness_and_settings(run: Path) -> list[tuple[float, float, float, float, float]]:
+    """Per frame: (t s, light, exposure, gain, mean grey level of the recorded image's centre)."""
+    topics = read(run)
+    images = dict(topics["/camera_163/image_raw/compressed"])
+    out = []
+    for log, eff in topics["/camera_163/effects"]:
+        grey = cv2.imdecode(np.frombuffer(images[log].data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        h, w = grey.shape
+        level = float(grey[h // 3 : 2 * h // 3, w // 3 : 2 * w // 3].mean())
+        out.append((log / 1e9, eff.illumination, eff.exposure_scale, eff.gain, level))
+    return out
+
+
+def test_auto_exposure_restores_the_brightness_after_the_light_drops_exposure_first_then_gain(
+    dimmed: dict[bool, Path],
+) -> None:
+    on, off = brightness_and_settings(dimmed[True]), brightness_and_settings(dimmed[False])
+    t0 = on[0][0]
+    before = on[0][4]
+    assert all(light == 1.0 for t, light, *_ in on if t - t0 < 1.0)
+    assert all(light == 0.125 for t, light, *_ in on if t - t0 >= 1.0)
+    # without it the image darkens by the gamma law: 0.125 ** (1 / 2.2) = 0.39
+    assert off[-1][4] == pytest.approx(before * 0.125 ** (1 / 2.2), rel=0.05)
+    assert all((e, g) == (1.0, 1.0) for *_, e, g, _ in off)
+    # with it: exposure to its limit (4x), then gain makes up the rest (2x): brightness back within the deadband
+    _, _, exposure, gain, level = on[-1]
+    assert exposure == pytest.approx(4.0) and 1.5 < gain < 2.5
+    assert level == pytest.approx(before, rel=0.1)
+    assert exposure * gain * 0.125 == pytest.approx(1.0, rel=0.15)

@@ -38,6 +38,13 @@ class PhotometricConfig:
     adc_bits: int = 12  # raw quantization before the 8-bit output
     gamma: float = 2.2  # the render is display-referred: noise is added in linear (electron) space
     noise_phases: int = 8  # pre-drawn noise fields cycled frame by frame (0: fresh each frame, full cost)
+    lighting: list[list[float]] = field(default_factory=list)  # [[t_s, scale], ...]: from t_s on the
+    # scene's light is scale x the rendered (a cloud over the skylights, lights switched off)
+    auto_exposure: bool = False  # the camera keeps its image as bright as at its first frame
+    max_exposure_scale: float = 4.0  # auto-exposure lengthens the exposure up to this (motion blur's limit)
+    max_gain: float = 16.0  # then raises the gain up to this (noise grows with it)
+    ae_step: float = 0.5  # share of the brightness error (in stops) corrected per frame
+    ae_deadband: float = 0.1  # brightness error (relative) it tolerates before acting
 
     def __post_init__(self) -> None:
         for key in ("full_well_e", "gain", "exposure_scale", "gamma"):
@@ -61,6 +68,36 @@ class PhotometricConfig:
         _at_least(
             "sensors.photometric.noise_phases", self.noise_phases, 0, "use 8 (0: fresh noise every frame)"
         )
+        _at_least("sensors.photometric.max_exposure_scale", self.max_exposure_scale, 1.0, "use 4.0")
+        _at_least("sensors.photometric.max_gain", self.max_gain, 1.0, "use 16.0")
+        if not 0.0 < self.ae_step <= 1.0:
+            raise ConfigError.invalid(
+                "sensors.photometric.ae_step", self.ae_step, "must be within (0, 1]", "use 0.5"
+            )
+        _at_least("sensors.photometric.ae_deadband", self.ae_deadband, 0.0, "use 0.1")
+        times = []
+        for entry in self.lighting:
+            if len(entry) != 2 or not entry[0] >= 0 or not entry[1] > 0:
+                raise ConfigError.invalid(
+                    "sensors.photometric.lighting", self.lighting, f"{list(entry)} is not [t_s >= 0, scale > 0]",
+                    "e.g. sensors.photometric.lighting=[[10.0,0.25]]",
+                )  # fmt: skip
+            times.append(entry[0])
+        if times != sorted(times):
+            raise ConfigError.invalid(
+                "sensors.photometric.lighting",
+                self.lighting,
+                "times must increase",
+                "list the changes in time order",
+            )
+
+    def light_at(self, t_s: float) -> float:
+        """The scene's light at ``t_s`` relative to the rendered (1 before the first change)."""
+        scale = 1.0
+        for start, value in self.lighting:
+            if t_s >= start:
+                scale = value
+        return scale
 
 
 @dataclass

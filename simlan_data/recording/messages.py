@@ -220,6 +220,7 @@ def camera_effects(
     noise_phase: int,
     exposure_scale: float,
     gain: float,
+    illumination: float,
     true_pose: Transform,
 ) -> Any:
     """simlan_msgs/CameraEffects: what the camera stage did to one frame (``sim/sensors.py``)."""
@@ -231,6 +232,7 @@ def camera_effects(
         noise_phase=int(noise_phase),
         exposure_scale=float(exposure_scale),
         gain=float(gain),
+        illumination=float(illumination),
         true_pose=pose_msg(x, y, z, [float(q) for q in true_pose.quat()]),
     )
 

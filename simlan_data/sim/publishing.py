@@ -148,6 +148,7 @@ class Publisher:
             noise_phase=shot.noise_phase,
             exposure_scale=shot.exposure_scale,
             gain=shot.gain,
+            illumination=shot.light,
             true_pose=sensor.true_camera.world_from_camera,
         )
         self.writer.submit(topic, t, build)  # built and serialized on a worker thread

@@ -23,8 +23,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
-from simlan_data.config.sensors import DriftConfig, SensorsConfig
+from simlan_data.config.sensors import DriftConfig, PhotometricConfig, SensorsConfig
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.transforms import Transform, quat_from_rpy
 from simlan_data.imaging.sensor_model import NoiseBank, PhotometricParams, SensorModel
@@ -64,6 +65,41 @@ def camera_sensors(cfg: SensorsConfig, seed: int, cameras: list[CameraModel]) ->
     return out
 
 
+class AutoExposure:
+    """A camera's exposure program: keep the image as bright as at its first frame, exposure
+    first (up to ``max_exposure_scale``), then gain (up to ``max_gain``), as industrial cameras do.
+
+    The camera meters its own image: the mean linear level of the render (every 8th pixel) times
+    the light, exposure and gain. Each frame it corrects ``ae_step`` of the error in stops when the
+    error exceeds ``ae_deadband`` (so a steady scene keeps its settings and the sensor model its
+    cache).
+    """
+
+    def __init__(self, cfg: PhotometricConfig) -> None:
+        self.cfg = cfg
+        self.exposure, self.gain = cfg.exposure_scale, cfg.gain
+        self.target: float | None = None
+        self._linear = ((np.arange(256, dtype=np.float64) / 255.0) ** cfg.gamma).astype(np.float32)
+
+    def settings(self, rgb: NDArray[np.uint8], light: float) -> tuple[float, float]:
+        """(exposure_scale, gain) for this frame, after metering ``rgb`` under ``light``."""
+        cfg = self.cfg
+        level = float(self._linear[rgb[::8, ::8]].mean()) * light * self.exposure * self.gain
+        if self.target is None:
+            self.target = level
+            return self.exposure, self.gain
+        if not cfg.auto_exposure or level <= 0:
+            return self.exposure, self.gain
+        error = self.target / level
+        if abs(error - 1.0) <= cfg.ae_deadband:
+            return self.exposure, self.gain
+        total = self.exposure * self.gain * error**cfg.ae_step
+        low = cfg.exposure_scale / cfg.max_exposure_scale
+        self.exposure = float(np.clip(total, low, cfg.max_exposure_scale))
+        self.gain = float(np.clip(total / self.exposure, 1.0, cfg.max_gain))
+        return self.exposure, self.gain
+
+
 @dataclass(frozen=True)
 class Capture:
     """One camera frame after the camera stage."""
@@ -72,8 +108,9 @@ class Capture:
     stamp_ns: int  # simulated time the camera writes in the header (its clock)
     dropped: bool  # lost: nothing recorded, no algorithm sees it
     noise_phase: int  # which pre-drawn noise field the colour image carries (-1: none)
-    exposure_scale: float
+    exposure_scale: float  # the camera's exposure time, relative to the reference
     gain: float
+    light: float  # the scene's light relative to the rendered (sensors.photometric.lighting)
 
 
 class CameraSensor:
@@ -100,6 +137,8 @@ class CameraSensor:
             )
             rng = run_rng(seed, "camera_noise", cid)
             self.model = SensorModel(params, self.true_camera, rng, bank=bank)
+        self.exposure = AutoExposure(p)
+        self._settings: tuple[float, float] | None = None
         self.offset_ns = 0
         if t.enabled and t.clock_offset_s > 0:
             self.offset_ns = round(
@@ -115,11 +154,17 @@ class CameraSensor:
         if t.enabled:
             stamp = t_ns + self.offset_ns + round(jitter * t.clock_jitter_s * 1e9)
             dropped = bool(lost < t.drop_rate)
-        phase = -1
+        phase, exposure, gain = -1, p.exposure_scale, p.gain
+        light = p.light_at(t_ns / 1e9) if p.enabled else 1.0
         if self.model is not None and images.rgb is not None and not dropped:
-            rgb = self.model.apply(images.rgb, frame_index)
+            exposure, gain = self.exposure.settings(images.rgb, light)
+            rgb = self.model.apply(images.rgb, frame_index, exposure_scale=exposure * light, gain=gain)
             phase = self.model.phase(frame_index)
-            # ``changed`` stays the render's: an unchanged scene in the same noise phase gives the
-            # same image, so the recorder reuses that phase's encoding (and depth, labels as ever)
-            images = replace(images, rgb=rgb)
-        return Capture(images, stamp, dropped, phase, p.exposure_scale, p.gain)
+            # ``changed`` stays the render's: an unchanged scene in the same noise phase and
+            # settings gives the same image, so the recorder reuses that phase's encoding (and
+            # depth, labels as ever); new settings change every phase's image
+            now = (exposure * light, gain)
+            changed = images.changed or (self._settings is not None and self._settings != now)
+            self._settings = now
+            images = replace(images, rgb=rgb, changed=changed)
+        return Capture(images, stamp, dropped, phase, exposure, gain, light)
