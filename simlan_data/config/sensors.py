@@ -144,6 +144,41 @@ class DriftConfig:
 
 
 @dataclass
+class ShutterConfig:
+    """Exposure over time: motion blur and rolling shutter, from sub-frames rendered at the agents'
+    poses within the exposure (``sim/shutter.py``)."""
+
+    enabled: bool = False
+    exposure_s: float = 0.005  # exposure time at exposure_scale 1 (auto-exposure lengthens it)
+    line_time_s: float = (
+        0.0  # rolling shutter: delay between the starts of two image rows (0: global shutter)
+    )
+    px_per_sample: float = 0.5  # one sub-frame per this much image motion (pixels) over the exposure window
+    max_samples: int = 8  # at most this many sub-frames per camera tick
+
+    def __post_init__(self) -> None:
+        _at_least("sensors.shutter.exposure_s", self.exposure_s, 0.0, "use 0.005")
+        if self.exposure_s > 0.2:
+            raise ConfigError.invalid(
+                "sensors.shutter.exposure_s", self.exposure_s, "at most 0.2 s (a 5 Hz camera)", "use 0.005"
+            )
+        _at_least(
+            "sensors.shutter.line_time_s",
+            self.line_time_s,
+            0.0,
+            "use 0 (global) or 6e-5 (a 4K rolling shutter, per rendered row)",
+        )
+        if not self.px_per_sample > 0:
+            raise ConfigError.invalid(
+                "sensors.shutter.px_per_sample", self.px_per_sample, "must be > 0", "use 0.5"
+            )
+        if not 1 <= self.max_samples <= 64:
+            raise ConfigError.invalid(
+                "sensors.shutter.max_samples", self.max_samples, "must be within 1..64", "use 8"
+            )
+
+
+@dataclass
 class SensorsConfig:
     """Realistic cameras: ``sensors=realistic`` (every effect on) or ``sensors=ideal`` (none, the default)."""
 
@@ -151,7 +186,8 @@ class SensorsConfig:
     photometric: PhotometricConfig = field(default_factory=PhotometricConfig)
     timing: TimingConfig = field(default_factory=TimingConfig)
     drift: DriftConfig = field(default_factory=DriftConfig)
+    shutter: ShutterConfig = field(default_factory=ShutterConfig)
 
     @property
     def active(self) -> bool:
-        return self.photometric.enabled or self.timing.enabled or self.drift.enabled
+        return self.photometric.enabled or self.timing.enabled or self.drift.enabled or self.shutter.enabled

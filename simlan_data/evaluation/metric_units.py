@@ -160,6 +160,9 @@ UNITS: dict[str, MetricUnit] = {
     "sim.camera_frames_dropped": MetricUnit(
         _COUNT, "camera frames lost by the camera stage (sensors.timing.drop_rate)"
     ),
+    "sim.camera_subframes": MetricUnit(
+        _COUNT, "renders of all cameras per tick, summed (motion blur sub-frames)"
+    ),
     "sim.render_wall_s": MetricUnit("s", "wall time spent rendering"),
     "sim.localize_wall_s": MetricUnit("s", "wall time spent localizing"),
     # ----------------------------------------------------------------------------- recording

@@ -222,6 +222,9 @@ def camera_effects(
     gain: float,
     illumination: float,
     true_pose: Transform,
+    exposure_time_s: float = 0.0,
+    line_time_s: float = 0.0,
+    subframes: int = 1,
 ) -> Any:
     """simlan_msgs/CameraEffects: what the camera stage did to one frame (``sim/sensors.py``)."""
     x, y, z = (float(v) for v in true_pose.translation)
@@ -233,6 +236,9 @@ def camera_effects(
         exposure_scale=float(exposure_scale),
         gain=float(gain),
         illumination=float(illumination),
+        exposure_time_s=float(exposure_time_s),
+        line_time_s=float(line_time_s),
+        subframes=int(subframes),
         true_pose=pose_msg(x, y, z, [float(q) for q in true_pose.quat()]),
     )
 

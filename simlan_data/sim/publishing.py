@@ -150,6 +150,9 @@ class Publisher:
             gain=shot.gain,
             illumination=shot.light,
             true_pose=sensor.true_camera.world_from_camera,
+            exposure_time_s=sensor.exposure_time_s() if sensor.cfg.shutter.enabled else 0.0,
+            line_time_s=sensor.cfg.shutter.line_time_s if sensor.cfg.shutter.enabled else 0.0,
+            subframes=shot.subframes,
         )
         self.writer.submit(topic, t, build)  # built and serialized on a worker thread
 

@@ -111,6 +111,7 @@ class Capture:
     exposure_scale: float  # the camera's exposure time, relative to the reference
     gain: float
     light: float  # the scene's light relative to the rendered (sensors.photometric.lighting)
+    subframes: int = 1  # renders averaged into the image (motion blur, rolling shutter)
 
 
 class CameraSensor:
@@ -146,7 +147,11 @@ class CameraSensor:
             )
         self._frames = run_rng(seed, "camera_frames", cid)  # jitter and drops, one draw of each per frame
 
-    def capture(self, t_ns: int, frame_index: int, images: CameraImages) -> Capture:
+    def exposure_time_s(self) -> float:
+        """The exposure time of the next frame (``sensors.shutter.exposure_s`` x auto-exposure)."""
+        return self.cfg.shutter.exposure_s * self.exposure.exposure
+
+    def capture(self, t_ns: int, frame_index: int, images: CameraImages, *, subframes: int = 1) -> Capture:
         t, p = self.cfg.timing, self.cfg.photometric
         jitter, lost = self._frames.normal(0.0, 1.0), self._frames.random()
         stamp = t_ns
@@ -167,4 +172,4 @@ class CameraSensor:
             changed = images.changed or (self._settings is not None and self._settings != now)
             self._settings = now
             images = replace(images, rgb=rgb, changed=changed)
-        return Capture(images, stamp, dropped, phase, exposure, gain, light)
+        return Capture(images, stamp, dropped, phase, exposure, gain, light, subframes)

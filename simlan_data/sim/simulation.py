@@ -51,6 +51,7 @@ from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.sim.scene import Inputs, Scene
 from simlan_data.sim.sensors import CameraSensor, camera_sensors
+from simlan_data.sim.shutter import expose
 from simlan_data.world._pybullet import pb
 
 
@@ -67,6 +68,7 @@ class RunStats:
     camera_frames: int = 0
     camera_frames_changed: int = 0
     camera_frames_dropped: int = 0  # lost by the camera stage (sensors.timing.drop_rate)
+    camera_subframes: int = 0  # camera ticks' renders of every camera (> ticks: motion blur, sensors.shutter)
     render_wall_s: float = 0.0
     localize_wall_s: float = 0.0
     renderer: str = ""
@@ -94,6 +96,7 @@ class RunStats:
             "sim.camera_frames": float(self.camera_frames),
             "sim.camera_frames_changed": float(self.camera_frames_changed),
             "sim.camera_frames_dropped": float(self.camera_frames_dropped),
+            "sim.camera_subframes": float(self.camera_subframes),
             "sim.render_wall_s": self.render_wall_s,
             "sim.localize_wall_s": self.localize_wall_s,
             "agents.collisions": float(sum(self.collisions.values())),
@@ -361,14 +364,23 @@ class Simulation:
         bird's-eye stitcher and the driver."""
         scene, stats, stack = run.scene, run.stats, run.stack
         scene.refresh_static_layers()
-        moved = scene.moved_boxes()
+
+        def render_all() -> list[CameraImages]:
+            moved = scene.moved_boxes()
+            return [renderer.render(moved) for renderer in scene.renderers]
+
+        # the agents' motion within each camera's exposure (sensors.shutter), or one render
+        exposures = [sensor.exposure_time_s() for sensor in run.sensors]
+        rendered, subframes = expose(
+            self.cfg.sensors.shutter, scene.agents, scene.cameras, exposures, render_all
+        )
+        stats.camera_subframes += subframes
         frames = []
         index = step // self.camera_every
-        for renderer, camera, sensor in zip(scene.renderers, scene.cameras, run.sensors, strict=True):
-            images = renderer.render(moved)
+        for images, camera, sensor in zip(rendered, scene.cameras, run.sensors, strict=True):
             stats.camera_frames += 1
             stats.camera_frames_changed += int(images.changed)
-            shot = sensor.capture(t, index, images)
+            shot = sensor.capture(t, index, images, subframes=subframes)
             run.pub.camera_effects(t, camera, shot, sensor)
             if shot.dropped:
                 stats.camera_frames_dropped += 1
