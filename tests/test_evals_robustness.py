@@ -149,6 +149,10 @@ def test_breaking_points_take_the_first_strength_whose_mean_leaves_the_promise(t
             r"invalid overrides in case noise\[",
         ),
         ({}, r"no effects in .*tiny.effects"),
+        (
+            {"noise": {**EFFECTS["noise"], "values": [0, 2]}},
+            r"0 to a power <= 0 in .*effects.noise.also.sensors.photometric.exposure_scale",
+        ),
     ],
 )
 def test_a_bad_sweep_is_refused_and_nothing_is_written(
@@ -171,9 +175,9 @@ def test_a_bad_sweep_is_one_line_on_stderr_and_exit_code_2(tmp_path: Path) -> No
 
 def test_the_shipped_sweep_loads_and_lists() -> None:
     sweep = load_robustness(evals.DEFAULT_FILE, "robustness")
-    assert {e.name for e in sweep.effects} == {"noise", "clock", "drops", "drift"}
+    assert {e.name for e in sweep.effects} == {"noise", "blur", "clock", "drops", "drift"}
     assert all(len(c.seeds) == 2 for c in sweep.suite.cases)
-    assert "robustness sweep robustness: 16 strengths x 2 seeds" in evals.list_suite_file(evals.DEFAULT_FILE)
+    assert "robustness sweep robustness: 20 strengths x 2 seeds" in evals.list_suite_file(evals.DEFAULT_FILE)
 
 
 def test_a_plug_in_localizer_gets_its_curve_from_the_same_command(tmp_path: Path) -> None:
@@ -189,3 +193,21 @@ def test_a_plug_in_localizer_gets_its_curve_from_the_same_command(tmp_path: Path
     table = pl.read_csv(out / "robustness.csv", schema=ROBUSTNESS_SCHEMA)
     assert table.height == len(METRICS) and table["value"].null_count() == 0
     assert "--set algorithms/localizer=centroid" in (out / "robustness.md").read_text()
+
+
+@pytest.mark.parametrize(
+    ("flags", "match"),
+    [
+        (["--inject", "bias"], r"--inject with a robustness sweep in arguments"),
+        (["--accept"], r"--accept with a robustness sweep in arguments"),
+        (["--only", "blur"], r"unknown effect 'blur' in --only: effects: drops, noise"),
+    ],
+)
+def test_suite_only_flags_and_unknown_effects_are_refused(
+    tmp_path: Path, flags: list[str], match: str
+) -> None:
+    path = sweep_file(tmp_path)
+    with pytest.raises(ConfigError, match=match) as err:
+        evals.main(["tiny", "--file", str(path), "--out", str(tmp_path / "out"), *flags])
+    assert err.value.exit_code == 2
+    assert not (tmp_path / "out").exists()

@@ -50,7 +50,13 @@ from simlan_data.evaluation import (
     robustness_report,
 )
 from simlan_data.evaluation.compare import compare_tables, print_comparison, suite_checks, write_comparison
-from simlan_data.evaluation.robustness import breaking_points, load_robustness, robustness_table, sweep_names
+from simlan_data.evaluation.robustness import (
+    Robustness,
+    breaking_points,
+    load_robustness,
+    robustness_table,
+    sweep_names,
+)
 from simlan_data.evaluation.suite import (
     FAILING,
     JOBS_FILE,
@@ -439,39 +445,10 @@ def _run_side(
 # ------------------------------------------------------------------------- robustness sweep
 def run_robustness(args: argparse.Namespace) -> int:
     """Every effect at every strength over the seeds, then the curves and where they break."""
-    for flag, on in (
-        ("--candidate", args.candidate),
-        ("--inject", args.inject),
-        ("--accept", args.accept),
-        ("--regenerate", args.regenerate),
-        ("--reuse", args.reuse),
-    ):
-        if on:
-            raise ConfigError(
-                f"{flag} with a robustness sweep",
-                "arguments",
-                "a sweep runs its effects; compare algorithms with --set on two sweeps",
-                f"drop {flag}",
-            )
+    _refuse_with_sweep(args)
     sweep = load_robustness(args.file, args.suite, seeds=args.seeds, only=args.only)
     _check_run_args(args)
-    cases = list(sweep.suite.cases)
-    with tempfile.TemporaryDirectory() as tmp:  # compose every run before anything is written
-        conf = Path(tmp) / "conf"
-        planned = plan_jobs(cases, Path(tmp) / "runs")
-        write_job_configs(sweep.suite, planned, conf)
-        check_jobs(planned, conf, list(args.set))
-    out = _out_dir(args)
-    jobs = plan_jobs(cases, out / "runs")
-    try:
-        simulate(sweep.suite, jobs, [], out, launcher=args.launcher, n_jobs=args.jobs, extra=list(args.set))
-    except SimlanError as err:
-        if isinstance(err, ConfigError):
-            shutil.rmtree(out, ignore_errors=True)
-            raise
-        print(err.line())  # every run failed: a result to report
-        for j in jobs:
-            j.error = j.error or err.line()
+    out, jobs = _simulate_sweep(args, sweep)
     write_jobs_file(jobs, sweep.suite, [], out)
     collect_run_metrics(jobs)
     replay_all(jobs, [], out, n_jobs=args.jobs)
@@ -492,8 +469,48 @@ def run_robustness(args: argparse.Namespace) -> int:
     robustness_report.print_summary(verdicts)
     for f in failures:
         print(f"FAILED {f}")
-    print(f"robustness: {report} (+ {csv.name}, {len(plots)} plots in {plots[0].parent if plots else out})")
+    print(f"robustness: {report} (+ {csv.name}, {len(plots)} plots in {out / 'plots'})")
     return EXIT_FAILED_RUN if failures else 0
+
+
+def _refuse_with_sweep(args: argparse.Namespace) -> None:
+    """The suite-only flags mean nothing to a robustness sweep."""
+    for flag, on in (
+        ("--candidate", args.candidate),
+        ("--inject", args.inject),
+        ("--accept", args.accept),
+        ("--regenerate", args.regenerate),
+        ("--reuse", args.reuse),
+    ):
+        if on:
+            raise ConfigError(
+                f"{flag} with a robustness sweep",
+                "arguments",
+                "a sweep runs its effects; a plug-in's curves come from --set on the same sweep",
+                f"drop {flag}",
+            )
+
+
+def _simulate_sweep(args: argparse.Namespace, sweep: Robustness) -> tuple[Path, list[Job]]:
+    """Compose every run before anything is written, then simulate them all (one multirun)."""
+    cases = list(sweep.suite.cases)
+    with tempfile.TemporaryDirectory() as tmp:
+        conf = Path(tmp) / "conf"
+        planned = plan_jobs(cases, Path(tmp) / "runs")
+        write_job_configs(sweep.suite, planned, conf)
+        check_jobs(planned, conf, list(args.set))
+    out = _out_dir(args)
+    jobs = plan_jobs(cases, out / "runs")
+    try:
+        simulate(sweep.suite, jobs, [], out, launcher=args.launcher, n_jobs=args.jobs, extra=list(args.set))
+    except ConfigError:
+        shutil.rmtree(out, ignore_errors=True)  # refused before any run: leave nothing behind
+        raise
+    except SimlanError as err:  # every run failed: a result to report
+        print(err.line())
+        for j in jobs:
+            j.error = j.error or err.line()
+    return out, jobs
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -89,7 +89,7 @@ class Robustness:
 
 
 def _power(value: float, power: float) -> float:
-    return float(value) ** power if value != 0 or power > 0 else 0.0
+    return float(float(value) ** power)  # (0 with a power <= 0 is refused on load)
 
 
 def _err(where: str, what: str, why: str, fix: str) -> ConfigError:
@@ -143,10 +143,14 @@ def _effect(name: str, entry: Any, where: str) -> Effect:
             raise _err(
                 f"{where}.also.{k}", f"invalid power {p!r}", "expected a number", "e.g. -1 (1 / value)"
             )
+        if p <= 0 and 0 in values:
+            raise _err(
+                f"{where}.also.{k}", "0 to a power <= 0", "a strength is 0", "start the strengths above 0"
+            )
     return Effect(
         name,
         key,
-        tuple(float(v) if isinstance(v, float) else v for v in values),
+        tuple(values),
         _strings(e.get("set"), f"{where}.set"),
         tuple((str(k), float(p)) for k, p in also.items()),
     )
