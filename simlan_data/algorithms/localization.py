@@ -223,6 +223,7 @@ class Localizer:
         self._slots = {c: i for i, c in enumerate(self.cameras)}
         self._geo: _CameraArrays | None = None
         self._frame_obs: list[MarkerObservation] = []
+        self._frame_stamps: dict[str, int] = {}  # camera -> the stamp of its image in this frame set
         self._pending: deque[tuple[int, PoseFix]] = deque()  # (usable from, fix)
         self._full_cache: dict[tuple[str, bytes], tuple[list[Detection], list[MarkerObservation]]] = {}
         self._frames_seen: dict[str, int] = {}
@@ -461,6 +462,7 @@ class Localizer:
         the same plan.
         """
         self._frame_obs.extend(found.observations)
+        self._frame_stamps[camera_id] = t_ns
         self.last_detections[camera_id] = found.detections
         self.timings.append(
             FrameTiming(
@@ -469,8 +471,11 @@ class Localizer:
         )
 
     def close_frame(self, t_ns: int) -> list[PoseFix]:
-        """Fuse the observations of this frame set into one fix per agent."""
+        """Fuse the observations of this frame set into one fix per agent, stamped with the time
+        its images say they were taken (the mean stamp of the cameras that saw the marker: with
+        cameras on clocks of their own, sensors.timing, that is what a fix knows of its time)."""
         obs, self._frame_obs = self._frame_obs, []
+        stamps, self._frame_stamps = self._frame_stamps, {}
         self.last_observations = obs
         fixes = []
         for marker_id in sorted({o.marker_id for o in obs}):
@@ -480,9 +485,11 @@ class Localizer:
             c, s = np.cos(yaw), np.sin(yaw)
             ox, oy = mount.offset_xy_m
             bx, by = self.params.bias_m
+            seen = sorted({o.camera_id for o in group})
+            stamp = round(sum(stamps.get(c, t_ns) for c in seen) / len(seen)) if seen else t_ns
             fix = PoseFix(
                 mount.namespace,
-                t_ns,
+                stamp,
                 x - (c * ox - s * oy) + bx,
                 y - (s * ox + c * oy) + by,
                 yaw,
