@@ -7,6 +7,7 @@ bump) so that a 3 s run shows each of them.
 
 from __future__ import annotations
 
+import json
 from collections import defaultdict
 from pathlib import Path
 
@@ -203,3 +204,24 @@ def test_auto_exposure_restores_the_brightness_after_the_light_drops_exposure_fi
     assert exposure == pytest.approx(4.0) and 1.5 < gain < 2.5
     assert level == pytest.approx(before, rel=0.1)
     assert exposure * gain * 0.125 == pytest.approx(1.0, rel=0.15)
+
+
+def test_cameras_whose_clocks_run_ahead_do_not_stop_the_robot(tmp_path: Path) -> None:
+    """A camera clock ahead of the simulation stamps its images in the future: the fix is then
+    just new, not 'never seen' (which stopped the robot for good before: seed 0's cameras 160/161
+    run ahead at sensors=realistic's 2 ms)."""
+    proc = run_cli(
+        "duration_s=3",
+        "progress=false",
+        "cameras.streams=[rgb]",
+        "seed=0",
+        "sensors=realistic",
+        "sensors.photometric.enabled=false",
+        "sensors.drift.enabled=false",
+        "sensors.shutter.enabled=false",
+        f"hydra.run.dir={tmp_path / 'run'}",
+    )
+    assert proc.returncode == 0, proc.stderr
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["navigation.robot_agent_1.driven_m"] > 1.0
+    assert metrics["safety.robot_agent_1.stops"] == 0

@@ -136,7 +136,10 @@ class PoseEstimate:
 
     @property
     def age_s(self) -> float:
-        return (self.stamp_ns - self.last_fix_ns) / NS_PER_S
+        """Time since the newest fix's images were taken; never below 0: a camera whose clock runs
+        ahead (sensors.timing) stamps its images in the future, and the fix is then just new
+        (a negative age would read as "never seen", the safety layer's sentinel)."""
+        return max(0.0, (self.stamp_ns - self.last_fix_ns) / NS_PER_S)
 
 
 @dataclass
