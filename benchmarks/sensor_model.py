@@ -89,7 +89,7 @@ def measure(repeats: int) -> dict[str, float]:
 
 
 def figures(r: dict[str, float], repeats: int) -> list[dict]:
-    common = {"unit": "ms", "history": "docs/sensors.md"}
+    common = {"unit": "ms", "history": "docs/benchmarks/sensors.md"}
     note = f"960x540, realistic_defaults(), 8 noise phases, median of {repeats}"
     return [
         {"id": "sensor_full", "figure": "sensor model: full recompute of a frame", "value": round(r["full_ms"], 2),
@@ -119,7 +119,7 @@ def main() -> None:
         "machine": machine(),
         "date": datetime.date.today().isoformat(),
         "conditions": f"load average {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end",
-        "history": "docs/sensors.md",
+        "history": "docs/benchmarks/sensors.md",
         "ms_per_frame": r,
         "figures": figures(r, args.repeats),
     }

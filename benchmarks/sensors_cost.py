@@ -98,7 +98,7 @@ def main() -> None:
         "command": f"python benchmarks/sensors_cost.py --repeats {args.repeats} --duration {args.duration:g} --json FILE",
         "machine": machine(),
         "date": datetime.date.today().isoformat(),
-        "history": "docs/sensors.md",
+        "history": "docs/benchmarks/sensors.md",
         "summary": table_,
         "runs": results,
         "figures": figures,

@@ -11,6 +11,7 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import pytest
@@ -153,3 +154,18 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
     root = made_once(tmp_path_factory, "posemap", make)
     return root / "dataset", root / "train"
+
+
+@pytest.fixture(scope="session")
+def plugin_installed() -> None:
+    """The example plug-in package (examples/simlan_centroid_localizer), installed editable into
+    this interpreter's environment (loudly): its ``centroid`` localizer is then a registered name."""
+    example = REPO / "examples" / "simlan_centroid_localizer"
+    cmd = [sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "-e", str(example)]
+    with installed_packages_held():  # (tests in other processes may need the installed plug-ins unchanged)
+        done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, f"installing the example plug-in failed:\n{done.stdout}\n{done.stderr}"
+    found = {ep.name: ep.value for ep in entry_points(group="simlan_data.algorithms")}
+    assert found.get("centroid") == "simlan_centroid_localizer:CentroidLocalizer", found
+    # the built-in registers as "localizer.aruco" (ROLE.NAME) or "aruco"
+    assert any(v.endswith(":ArucoLocalizer") for v in found.values()), found

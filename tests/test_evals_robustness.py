@@ -180,6 +180,7 @@ def test_the_shipped_sweep_loads_and_lists() -> None:
     assert "robustness sweep robustness: 20 strengths x 2 seeds" in evals.list_suite_file(evals.DEFAULT_FILE)
 
 
+@pytest.mark.usefixtures("plugin_installed")  # (a clean checkout has the example plug-in only after this)
 def test_a_plug_in_localizer_gets_its_curve_from_the_same_command(tmp_path: Path) -> None:
     path = sweep_file(tmp_path, effects={"drops": {**EFFECTS["drops"], "values": [0.5]}})
     out = tmp_path / "out"
