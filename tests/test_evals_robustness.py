@@ -184,10 +184,13 @@ def test_the_shipped_sweep_loads_and_lists() -> None:
 def test_a_plug_in_localizer_gets_its_curve_from_the_same_command(tmp_path: Path) -> None:
     path = sweep_file(tmp_path, effects={"drops": {**EFFECTS["drops"], "values": [0.5]}})
     out = tmp_path / "out"
-    assert (
-        evals.main(["tiny", "--file", str(path), "--out", str(out), "--set", "algorithms/localizer=centroid"])
-        == 0
-    )
+    # in a process of its own, as users run it: this one read the installed entry points before
+    # the fixture installed the plug-in
+    proc = run_cli(
+        "tiny", "--file", str(path), "--out", str(out), "--set", "algorithms/localizer=centroid",
+        module="simlan_data.evals",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
     (run,) = (out / "runs").glob("drops_*")
     config = yaml.safe_load((run / ".hydra" / "config.yaml").read_text())
     assert config["algorithms"]["localizer"]["name"] == "centroid"  # the plug-in ran, live
