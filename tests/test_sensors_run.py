@@ -222,6 +222,7 @@ def test_cameras_whose_clocks_run_ahead_do_not_stop_the_robot(tmp_path: Path) ->
         f"hydra.run.dir={tmp_path / 'run'}",
     )
     assert proc.returncode == 0, proc.stderr
+    assert "  sensors        realistic: timing; " in proc.stdout  # the summary says what is on
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["navigation.robot_agent_1.driven_m"] > 1.0
     assert metrics["safety.robot_agent_1.stops"] == 0

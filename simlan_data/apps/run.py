@@ -215,6 +215,13 @@ def log_summary(cfg: Config, stats: RunStats, metrics: dict[str, float], run_dir
         f"  simulated      {metrics['sim.duration_s']:.1f} s in {metrics['sim.wall_s']:.1f} s wall: real-time factor {metrics['sim.rtf']:.2f}",
         f"  cameras        {len(cfg.cameras.ids)} x {cfg.cameras.rate_hz:g} Hz {cfg.cameras.width}x{cfg.cameras.height} {streams}, {int(stats.camera_frames)} frames ({stats.renderer} renderer, {'layered' if cfg.render.layered else 'full'})",
     ]
+    if cfg.sensors.active:  # realistic cameras (docs/sensors.md): what the camera stage did
+        on = [g for g in ("photometric", "timing", "drift", "shutter") if getattr(cfg.sensors, g).enabled]
+        lines.append(
+            f"  sensors        {cfg.sensors.name}: {', '.join(on)}; {int(stats.camera_frames_dropped)} frames lost,"
+            f" {int(stats.camera_subframes)} renders per camera for {int(stats.camera_frames) // max(1, len(cfg.cameras.ids))} ticks"
+            " (per-frame truth on /camera_<id>/effects)"
+        )
     for ns in sorted(stats.collisions):
         nav = ""
         if f"navigation.{ns}.goals_total" in metrics:
