@@ -488,8 +488,8 @@ class Localizer:
             c, s = np.cos(yaw), np.sin(yaw)
             ox, oy = mount.offset_xy_m
             bx, by = self.params.bias_m
-            seen = sorted({o.camera_id for o in group})
-            stamp = round(sum(stamps.get(c, t_ns) for c in seen) / len(seen)) if seen else t_ns
+            seen = {o.camera_id for o in group}  # (a group is never empty)
+            stamp = round(sum(stamps.get(cam, t_ns) for cam in seen) / len(seen))
             fix = PoseFix(
                 mount.namespace,
                 stamp,

@@ -189,6 +189,11 @@ class _Phase:
     settings: tuple[float, float] | None = None  # (exposure_scale, gain) the output was made with
 
 
+def linear_levels(gamma: float) -> NDArray[np.float64]:
+    """The linear light of each 8-bit display-referred level: ``(level / 255) ** gamma``."""
+    return (np.arange(256, dtype=np.float64) / 255.0) ** gamma
+
+
 def draw_noise_field(rng: np.random.Generator, shape: tuple[int, ...]) -> NDArray[np.int8]:
     """A standard normal field stored as int8 (``NOISE_SCALE`` per sigma)."""
     z = rng.standard_normal(shape, dtype=np.float32)
@@ -253,19 +258,15 @@ class SensorModel:
         self._qmax = float(2**params.adc_bits - 1)
         codes = np.arange(2**params.adc_bits, dtype=np.float64) / self._qmax
         self._out_lut = np.rint(255.0 * codes ** (1.0 / params.gamma)).astype(np.uint8)
-        self._linear = (np.arange(256, dtype=np.float64) / 255.0) ** params.gamma
+        self._linear = linear_levels(params.gamma)
         fields = (
             bank.fields_for(rng, params.noise_phases, self.shape)
             if bank is not None
-            else [self._draw_field(rng) for _ in range(params.noise_phases)]
+            else [draw_noise_field(rng, self.shape) for _ in range(params.noise_phases)]
         )
         self._phases = [_Phase(field, np.ones(camera.height, bool)) for field in fields]
         self._fresh_key = int(rng.integers(2**63))  # noise_phases == 0: frame noise keyed by index
         self._last_input: NDArray[np.uint8] | None = None
-
-    def _draw_field(self, rng: np.random.Generator) -> NDArray[np.int8]:
-        """One noise phase of this camera alone."""
-        return draw_noise_field(rng, self.shape)
 
     def phase(self, frame_index: int) -> int:
         """The noise field frame ``frame_index`` uses (-1 with fresh noise per frame)."""

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from simlan_data.config.sensors import DriftConfig, PhotometricConfig, SensorsConfig
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.transforms import Transform, quat_from_rpy
-from simlan_data.imaging.sensor_model import NoiseBank, PhotometricParams, SensorModel
+from simlan_data.imaging.sensor_model import NoiseBank, PhotometricParams, SensorModel, linear_levels
 from simlan_data.seeding import run_rng
 from simlan_data.sim.rendering import CameraImages
 
@@ -47,13 +47,16 @@ def drifted(camera: CameraModel, drift: DriftConfig, seed: int) -> CameraModel:
     return replace(camera, camera_from_world=true_world_from_cam.inverse())
 
 
-def camera_sensors(cfg: SensorsConfig, seed: int, cameras: list[CameraModel]) -> list[CameraSensor]:
-    """The camera stage of every camera of a run; cameras of one image size share a noise bank
-    (twice the fields one camera uses: the draw is paid once per run, not per camera)."""
+def camera_sensors(
+    cfg: SensorsConfig, seed: int, cameras: list[CameraModel], true_cameras: list[CameraModel]
+) -> list[CameraSensor]:
+    """The camera stage of every camera of a run (``cameras`` as believed, ``true_cameras`` as
+    the renderers draw them: ``drifted``); cameras of one image size share a noise bank (twice the
+    fields one camera uses: the draw is paid once per run, not per camera)."""
     banks: dict[tuple[int, int], NoiseBank] = {}
     phases = cfg.photometric.noise_phases
     out = []
-    for cam in cameras:
+    for cam, true_cam in zip(cameras, true_cameras, strict=True):
         bank = None
         if cfg.photometric.enabled and phases > 0:
             size = (cam.height, cam.width)
@@ -61,7 +64,7 @@ def camera_sensors(cfg: SensorsConfig, seed: int, cameras: list[CameraModel]) ->
                 rng = run_rng(seed, "camera_noise_bank", f"{cam.width}x{cam.height}")
                 banks[size] = NoiseBank(rng, (cam.height, cam.width, 3), fields=2 * phases)
             bank = banks[size]
-        out.append(CameraSensor(cfg, seed, cam, bank))
+        out.append(CameraSensor(cfg, seed, cam, true_cam, bank))
     return out
 
 
@@ -79,16 +82,18 @@ class AutoExposure:
         self.cfg = cfg
         self.exposure, self.gain = cfg.exposure_scale, cfg.gain
         self.target: float | None = None
-        self._linear = ((np.arange(256, dtype=np.float64) / 255.0) ** cfg.gamma).astype(np.float32)
+        self._linear = linear_levels(cfg.gamma).astype(np.float32)
 
     def settings(self, rgb: NDArray[np.uint8], light: float) -> tuple[float, float]:
         """(exposure_scale, gain) for this frame, after metering ``rgb`` under ``light``."""
         cfg = self.cfg
+        if not cfg.auto_exposure:  # fixed settings: nothing to meter
+            return self.exposure, self.gain
         level = float(self._linear[rgb[::8, ::8]].mean()) * light * self.exposure * self.gain
         if self.target is None:
             self.target = level
             return self.exposure, self.gain
-        if not cfg.auto_exposure or level <= 0:
+        if level <= 0:
             return self.exposure, self.gain
         error = self.target / level
         if abs(error - 1.0) <= cfg.ae_deadband:
@@ -118,11 +123,15 @@ class CameraSensor:
     """The camera stage of one camera (``capture`` once per rendered frame, in frame order)."""
 
     def __init__(
-        self, cfg: SensorsConfig, seed: int, believed: CameraModel, bank: NoiseBank | None = None
+        self,
+        cfg: SensorsConfig,
+        seed: int,
+        believed: CameraModel,
+        true_camera: CameraModel,
+        bank: NoiseBank | None = None,
     ) -> None:
         cid = believed.camera_id
-        self.cfg, self.believed = cfg, believed
-        self.true_camera = drifted(believed, cfg.drift, seed)
+        self.cfg, self.believed, self.true_camera = cfg, believed, true_camera
         p, t = cfg.photometric, cfg.timing
         self.model: SensorModel | None = None
         if p.enabled:

@@ -38,7 +38,8 @@ MOVING_MPS = 1e-3  # slower than this (m/s, or rad/s times the agent's reach) co
 
 @dataclass(frozen=True)
 class _Motion:
-    """An agent's base state at the tick, to move it back along and restore it."""
+    """An agent's base state at the tick, to move it back along (``expose`` restores the whole
+    simulation afterwards)."""
 
     body: int
     client: int
@@ -59,10 +60,6 @@ class _Motion:
         )
         _, orn = pb.multiplyTransforms((0, 0, 0), rot, (0, 0, 0), self.orn)
         pb.resetBasePositionAndOrientation(self.body, pos, orn, physicsClientId=self.client)
-
-    def restore(self) -> None:
-        pb.resetBasePositionAndOrientation(self.body, self.pos, self.orn, physicsClientId=self.client)
-        pb.resetBaseVelocity(self.body, self.lin, self.ang, physicsClientId=self.client)
 
 
 def moving(agents: Sequence[Agent]) -> list[_Motion]:

@@ -347,7 +347,8 @@ class Simulation:
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
         driver = make_driver(cfg, scene.agents, writer, self.inputs.posemap)  # motion files or the drive
-        sensors = camera_sensors(cfg.sensors, cfg.seed, scene.cameras)
+        true_cameras = [r.camera for r in scene.renderers]  # (drifted once, where the scene built them)
+        sensors = camera_sensors(cfg.sensors, cfg.seed, scene.cameras, true_cameras)
         return _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
 
     def _camera_tick(self, run: _Run, step: int, t: int) -> None:
