@@ -226,3 +226,20 @@ def test_cameras_whose_clocks_run_ahead_do_not_stop_the_robot(tmp_path: Path) ->
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["navigation.robot_agent_1.driven_m"] > 1.0
     assert metrics["safety.robot_agent_1.stops"] == 0
+
+
+def test_the_live_birdseye_view_survives_cameras_whose_first_frames_are_lost(tmp_path: Path) -> None:
+    """With 90 % of frames lost some camera has delivered nothing when the stitcher first runs:
+    it gets black for that camera (a KeyError ended the run before)."""
+    proc = run_cli(
+        "duration_s=2",
+        "progress=false",
+        "cameras.streams=[rgb]",
+        "sensors=realistic",
+        "sensors.timing.drop_rate=0.9",
+        "birdseye.rate_hz=1",
+        f"hydra.run.dir={tmp_path / 'run'}",
+    )
+    assert proc.returncode == 0, proc.stderr
+    birdseye = read(tmp_path / "run", prefix="/birdseye")["/birdseye/image"]
+    assert len(birdseye) == 3  # at 0, 1 and 2 s

@@ -396,7 +396,12 @@ class Simulation:
             )
             frames.append(_Frame(camera, shot.images, plan, search, encoded, shot.stamp_ns))
         if self.birdseye is not None:  # a lost frame: the stitcher keeps the camera's last image
-            self.birdseye.tick(t, index, [run.delivered[c.camera_id] for c in scene.cameras])
+            # (a camera that has delivered none yet: black, what a stitcher has of it)
+            last = [
+                run.delivered.get(c.camera_id) or CameraImages(np.zeros_like(im.rgb), None, None)
+                for c, im in zip(scene.cameras, rendered, strict=True)
+            ]
+            self.birdseye.tick(t, index, last)
         if run.driver is not None:
             run.driver.camera_tick(t, index, [(f.camera, f.images) for f in frames])
         return frames
