@@ -24,6 +24,7 @@ from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms,
 from simlan_data.config.collision import CollisionScenarioConfig
 from simlan_data.config.live import LiveConfig
 from simlan_data.config.missions import MissionsConfig
+from simlan_data.config.randomize import RandomizeConfig
 from simlan_data.config.sensors import SensorsConfig
 from simlan_data.errors import ConfigError
 from simlan_data.recording.timebase import DEFAULT_EPOCH, parse_epoch
@@ -421,6 +422,7 @@ class Config:
     live: LiveConfig = field(default_factory=LiveConfig)  # a live view in Foxglove (config/live.py)
     fleet: MissionsConfig = field(default_factory=MissionsConfig)  # scenario=fleet (config/missions.py)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)  # realistic cameras (config/sensors.py)
+    randomize: RandomizeConfig = field(default_factory=RandomizeConfig)  # domain randomization
 
     def __post_init__(self) -> None:
         if _incomplete(self):
