@@ -24,6 +24,7 @@ Data flow::
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import re
 import time
@@ -54,6 +55,7 @@ from simlan_data.evaluation.birdseye_metrics import (
 )
 from simlan_data.evaluation.replay import ReplayContext, check_options, register
 from simlan_data.imaging.image_files import write_image
+from simlan_data.recording import schema
 from simlan_data.recording.codecs import decode_compressed, decode_raw
 from simlan_data.recording.reader import Message
 from simlan_data.world.layout import load_layout
@@ -158,7 +160,8 @@ def _ground_truth(ctx: ReplayContext, spec: CanvasSpec) -> tuple[NDArray[np.uint
         ) from err
     assert isinstance(world_cfg, WorldConfig)
     backend = (ctx.config.get("render") or {}).get("backend", "auto")
-    sw = static_world(world_cfg, backend=backend)
+    drawn = ctx.reader.first(schema.RANDOMIZATION)  # randomize: the run's moved, tinted and added bodies
+    sw = static_world(world_cfg, backend=backend, randomization=json.loads(drawn.msg.data) if drawn else None)
     try:
         rgb, labels = render_orthographic(sw.client, spec, sw.labels)
     finally:

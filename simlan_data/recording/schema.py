@@ -61,6 +61,7 @@ GROUND_TRUTH_POSES = "/ground_truth/poses"
 CONFIG = "/simlan/config"
 RUN_INFO = "/simlan/run_info"
 SEMANTIC_LABELS = "/simlan/semantic_labels"
+RANDOMIZATION = "/simlan/randomization"
 BIRDSEYE_IMAGE = "/birdseye/image"
 SAFETY_EVENTS = "/safety/events"
 SAFETY_ZONES = "/safety/zones"
@@ -247,6 +248,11 @@ GLOBAL_TOPICS: tuple[Topic, ...] = (
     Topic(RUN_INFO, RUN_INFO_TYPE, "format version, seed, package and dependency versions, renderer (once)"),
     Topic(SEMANTIC_LABELS, SEMANTIC_LABELS_TYPE, "semantic class id -> name table (once)"),
     Topic(
+        RANDOMIZATION,
+        STRING_TYPE,
+        "what domain randomization drew (light, sun, colours, moves, distractors, paints) as JSON (once, runs with randomize on)",
+    ),
+    Topic(
         BIRDSEYE_IMAGE,
         COMPRESSED_IMAGE_TYPE,
         "stitched bird's-eye view, rgb8 JPEG, frame map, canvas as in the config's birdseye section (at birdseye.rate_hz, if > 0)",
@@ -273,7 +279,7 @@ REQUIRED_TOPICS = (CLOCK, TF_STATIC, GROUND_TRUTH_POSES, CONFIG, RUN_INFO)
 # Published once at the start and meant for every subscriber, also one that comes later: recorded
 # with the QoS a ROS 2 latched publisher offers (transient local, reliable, keep last 1, as
 # tf2's StaticTransformBroadcaster), so that `ros2 bag play` replays them to late subscribers too.
-LATCHED_TOPICS = frozenset({TF_STATIC, CONFIG, RUN_INFO, SEMANTIC_LABELS, SAFETY_ZONES})
+LATCHED_TOPICS = frozenset({TF_STATIC, CONFIG, RUN_INFO, SEMANTIC_LABELS, SAFETY_ZONES, RANDOMIZATION})
 ROS_DISTRO = "jazzy"  # the message definitions the bag embeds are Jazzy's (metadata.yaml ros_distro)
 
 

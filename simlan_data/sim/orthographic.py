@@ -10,8 +10,10 @@ without cameras or agents, for the replay's ground truth.
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +21,7 @@ from numpy.typing import NDArray
 from simlan_data.algorithms.birdseye import CanvasSpec
 from simlan_data.config.schema import WorldConfig
 from simlan_data.sim.pybullet_client import Client, connect
+from simlan_data.sim.randomize import replay_placements, replay_world
 from simlan_data.sim.rendering import EGL_MAX_TILE, LabelTable
 from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import WorldBodies, build_world
@@ -40,8 +43,11 @@ class StaticWorld:
         self.client.disconnect()
 
 
-def static_world(world_cfg: WorldConfig, *, backend: str = "auto") -> StaticWorld:
-    """Build and settle the warehouse of ``world_cfg`` as ``Scene.build`` does, without agents."""
+def static_world(
+    world_cfg: WorldConfig, *, backend: str = "auto", randomization: Mapping[str, Any] | None = None
+) -> StaticWorld:
+    """Build and settle the warehouse of ``world_cfg`` as ``Scene.build`` does, without agents;
+    ``randomization`` (a recording's ``/simlan/randomization``) moves, tints and adds as the run did."""
     client = connect(backend)
     try:
         cid = client.id
@@ -49,9 +55,10 @@ def static_world(world_cfg: WorldConfig, *, backend: str = "auto") -> StaticWorl
         pb.setTimeStep(1.0 / world_cfg.physics_hz, physicsClientId=cid)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=cid)
         physics = dict(world_cfg.physics)
-        placements = load_layout(world_cfg.layout, world_cfg.fidelity)
+        placements = replay_placements(load_layout(world_cfg.layout, world_cfg.fidelity), randomization or {})
         with tempfile.TemporaryDirectory(prefix="simlan_world_") as mesh_dir:
             world = build_world(cid, placements, physics, mesh_dir=Path(mesh_dir))
+        replay_world(cid, world, randomization or {})
         for _ in range(round(world_cfg.settle_s * world_cfg.physics_hz)):
             pb.stepSimulation(physicsClientId=cid)
         labels = LabelTable()

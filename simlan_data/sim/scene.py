@@ -8,6 +8,7 @@ the cameras' static layers (movable bodies hidden) and spawns the agents.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import tempfile
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ from simlan_data.sim.agents import Agent, spawn_agent
 from simlan_data.sim.dynamic_layer import MovedAgents, StaticMeshes
 from simlan_data.sim.posemap_drive import DriveInputs, load_drive_inputs
 from simlan_data.sim.pybullet_client import Client, connect
+from simlan_data.sim.randomize import LitRenderer, Randomizer, keep_clear
 from simlan_data.sim.rendering import CameraRenderer, LabelTable
 from simlan_data.sim.sensors import drifted
 from simlan_data.sim.urdf_check import check_urdf
@@ -177,6 +179,7 @@ class Scene:
     names: dict[int, str] = field(default_factory=dict)
     meshes: StaticMeshes | None = None  # layered: the warehouse meshes, removed between static layers
     moved: MovedAgents | None = None
+    randomizer: Randomizer | None = None  # domain randomization (sim/randomize.py): post_render per image
     _baked: dict[int, tuple] = field(default_factory=dict)
 
     @staticmethod
@@ -195,8 +198,13 @@ class Scene:
         pb.setTimeStep(1.0 / cfg.world.physics_hz, physicsClientId=cid)
         pb.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=cid)
         physics = dict(cfg.world.physics)
+        randomizer = Randomizer(cfg.randomize, cfg.seed)  # (randomize=off: changes nothing)
+        clear = keep_clear(cfg, inputs.agent_types, inputs.grid) if randomizer.moves_objects else Polygon()
+        placements = randomizer.jitter_placements(inputs.placements, clear)
         with tempfile.TemporaryDirectory(prefix="simlan_world_") as mesh_dir:
-            world = build_world(cid, inputs.placements, physics, mesh_dir=Path(mesh_dir))
+            world = build_world(cid, placements, physics, mesh_dir=Path(mesh_dir))
+        randomizer.paint_world(cid, world)
+        randomizer.add_distractors(cid, world, cameras=inputs.cameras, grid=inputs.grid, clear=clear)
         if world.skipped_models:
             log.info("layout models without geometry in this twin: %s", world.skipped_models)
         for conflict in world.layout_conflicts:
@@ -211,8 +219,10 @@ class Scene:
         for agent_cfg in cfg.agent_list:
             _check_spawn_clear(cid, agent_cfg, inputs.agent_types[agent_cfg.namespace], world)
         cam_cfg = cfg.cameras
+        # (light and sun from randomize: applied to each rendered colour image)
+        make = functools.partial(LitRenderer, randomizer=randomizer) if randomizer.lights else CameraRenderer
         renderers = [
-            CameraRenderer(
+            make(
                 client,
                 drifted(cam, cfg.sensors.drift, cfg.seed),  # drawn from where it truly hangs
                 labels,
@@ -235,9 +245,10 @@ class Scene:
             agent.apply_command(0.0, 0.0)
             labels.set(agent.body, agent.label)
             agents.append(agent)
+        randomizer.paint_agents(cid, agents)
         names = dict(world.names)
         names.update({a.body: a.namespace for a in agents})
-        scene = Scene(client, world, inputs.cameras, renderers, agents, labels, names)
+        scene = Scene(client, world, inputs.cameras, renderers, agents, labels, names, randomizer=randomizer)
         if cfg.render.layered:  # region renders draw only what moves (see sim/dynamic_layer.py)
             scene.meshes = StaticMeshes(client.id, world, labels)
             scene.meshes.remove()
