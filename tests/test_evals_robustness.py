@@ -175,9 +175,15 @@ def test_a_bad_sweep_is_one_line_on_stderr_and_exit_code_2(tmp_path: Path) -> No
 
 def test_the_shipped_sweep_loads_and_lists() -> None:
     sweep = load_robustness(evals.DEFAULT_FILE, "robustness")
-    assert {e.name for e in sweep.effects} == {"noise", "blur", "clock", "drops", "drift"}
+    assert {e.name for e in sweep.effects} == {
+        *("noise", "blur", "clock", "drops", "drift", "shift"),
+        *("jitter", "unsync", "delay", "rolling", "vignetting"),
+    }
     assert all(len(c.seeds) == 2 for c in sweep.suite.cases)
-    assert "robustness sweep robustness: 20 strengths x 2 seeds" in evals.list_suite_file(evals.DEFAULT_FILE)
+    listing = evals.list_suite_file(evals.DEFAULT_FILE)
+    assert "robustness sweep robustness: 44 strengths x 2 seeds" in listing
+    safety = load_robustness(evals.DEFAULT_FILE, "robustness_safety")
+    assert {e.name for e in safety.effects} == {"drops", "delay"}
 
 
 @pytest.mark.usefixtures("plugin_installed")  # (a clean checkout has the example plug-in only after this)

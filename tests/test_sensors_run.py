@@ -2,7 +2,8 @@
 with the independent mcap + mcap_ros2 decoder, and its replay.
 
 The effects are made strong (20 % of frames lost, a 20 ms clock offset spread, a 1 cm / 0.5 deg
-bump) so that a 3 s run shows each of them.
+bump, cameras exposing up to 0.1 s apart, a 30 ms transport delay) so that a 3 s run shows each
+of them.
 """
 
 from __future__ import annotations
@@ -25,6 +26,9 @@ STRONG = (
     "sensors.timing.clock_offset_s=0.02",
     "sensors.drift.position_m=0.01",
     "sensors.drift.rotation_deg=0.5",
+    "sensors.timing.exposure_spread_s=0.1",  # free-running cameras, up to half a frame apart
+    "sensors.timing.delay_s=0.03",
+    "sensors.timing.delay_jitter_s=0.01",
 )
 COMMON = ("duration_s=3", "progress=false", "cameras.streams=[rgb]", "seed=3")  # the 11 GPSS cameras
 CAMERAS = [str(c) for c in range(160, 171)]
@@ -62,27 +66,34 @@ def test_every_effect_is_in_the_recording_and_the_header_stamps_are_the_cameras_
 ) -> None:
     topics = read(runs["real"])
     dropped_total = 0
-    offsets = []
+    offsets, phases = [], []
     for cid in CAMERAS:
         effects = topics[f"/camera_{cid}/effects"]
         images = dict(topics[f"/camera_{cid}/image_raw/compressed"])
         assert len(effects) == 16  # 3 s at 5 Hz, and the frame at 0: every rendered frame, lost ones too
+        lags = []
         for log, eff in effects:
-            assert ns(eff.header.stamp) == log  # the true exposure time
+            # the true exposure time: the arrival (log time) less the phase and transport delay
+            assert ns(eff.header.stamp) == log - round(eff.delay_s * 1e9)
+            lags.append(eff.delay_s)
             if eff.dropped:
                 dropped_total += 1
                 assert log not in images  # a lost frame is not recorded
                 continue
             # the image's header carries the stamp the camera wrote, not the true time
             assert ns(images[log].header.stamp) == ns(eff.stamp_written)
-            offsets.append(ns(eff.stamp_written) - log)
+            offsets.append(ns(eff.stamp_written) - ns(eff.header.stamp))
             assert 0 <= eff.noise_phase < 8
+        assert lags[0] == 0.0  # nothing shows the scene before the run began
+        phases.append(min(lags[1:]))
+        assert min(lags[1:]) > 0.0 and max(lags) < 0.1 + 0.03 + 0.05  # phase + delay (+ jitter)
         assert len(images) == sum(not e.dropped for _, e in effects)
     assert 15 <= dropped_total <= 60  # 20 % of 176
     assert (
         max(abs(o) for o in offsets) > 1_000_000
     )  # clocks 20 ms apart (standard deviation): > 1 ms somewhere
     assert len({round(o / 1e6) for o in offsets}) > 3  # offsets differ between cameras (and jitter)
+    assert max(phases) - min(phases) > 0.02  # the cameras expose at their own instants
 
 
 def test_the_true_camera_pose_is_bumped_from_the_recorded_calibration(runs: dict[str, Path]) -> None:
@@ -138,6 +149,8 @@ def test_replay_reproduces_the_live_run_under_every_effect(runs: dict[str, Path]
         ("sensors.timing.drop_rate=1.5", "sensors.timing.drop_rate"),
         ("sensors.photometric.vignetting=-0.2", "sensors.photometric.vignetting"),
         ("sensors.drift.rotation_deg=45", "sensors.drift"),
+        ("sensors.timing.delay_s=-0.03", "sensors.timing.delay_s"),
+        ("sensors.timing.exposure_spread_s=1.5", "sensors.timing"),
         ("sensors.photometric.lighting=[[2.0,-1.0]]", "sensors.photometric.lighting"),
         ("sensors.photometric.lighting=[[5.0,0.5],[2.0,0.25]]", "sensors.photometric.lighting"),
     ],

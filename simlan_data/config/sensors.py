@@ -7,7 +7,9 @@ recorded per frame on ``/camera_<id>/effects``:
 - ``photometric``: shot noise, read noise, ADC quantization, analog gain, exposure, vignetting
   (``imaging/sensor_model.py``), applied to the rendered colour image before it is encoded;
 - ``timing``: each camera's clock offset (constant), per-frame stamp jitter and frame drops; the
-  header stamp is when the camera says it exposed, the effects topic says when it did;
+  instant it exposes (a constant phase per camera: free-running cameras) and the transport delay
+  to the algorithms; the header stamp is when the camera says it exposed, the effects topic says
+  when it did;
 - ``drift``: the camera was bumped: the image is rendered from a perturbed true pose while the
   recorded ``camera_info`` and ``/tf_static`` (and what the algorithms are given) stay the believed
   calibration.
@@ -18,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from simlan_data.errors import ConfigError
+
+MAX_LAG_S = 1.0  # how far back a frame may show the scene (the pose history the simulation keeps)
 
 
 def _at_least(key: str, value: float, low: float, fix: str) -> None:
@@ -110,10 +114,27 @@ class TimingConfig:
     )
     clock_jitter_s: float = 0.0  # standard deviation of the per-frame stamp jitter
     drop_rate: float = 0.0  # probability that a frame is lost (not recorded, never reaches an algorithm)
+    exposure_spread_s: float = 0.0  # free-running cameras: each exposes a constant phase drawn in
+    # [0, this) before the tick that delivers its frame (0: hardware-triggered, all at once)
+    delay_s: float = 0.0  # transport: exposure to arrival at the algorithms (network, decode)
+    delay_jitter_s: float = 0.0  # standard deviation of the per-frame transport delay (clipped at 0)
 
     def __post_init__(self) -> None:
         _at_least("sensors.timing.clock_offset_s", self.clock_offset_s, 0.0, "use 0.005")
         _at_least("sensors.timing.clock_jitter_s", self.clock_jitter_s, 0.0, "use 0.001")
+        _at_least("sensors.timing.exposure_spread_s", self.exposure_spread_s, 0.0, "use 0 or up to 1/fps")
+        _at_least("sensors.timing.delay_s", self.delay_s, 0.0, "use 0.03")
+        _at_least("sensors.timing.delay_jitter_s", self.delay_jitter_s, 0.0, "use 0.005")
+        worst = self.exposure_spread_s + self.delay_s + 4 * self.delay_jitter_s
+        if worst > MAX_LAG_S:
+            raise ConfigError.invalid(
+                "sensors.timing",
+                f"exposure_spread_s={self.exposure_spread_s}, delay_s={self.delay_s}, "
+                f"delay_jitter_s={self.delay_jitter_s}",
+                f"a frame may show the scene at most {MAX_LAG_S:g} s before it arrives "
+                "(spread + delay + 4 x jitter)",
+                "use exposure_spread_s <= 0.2 and delay_s <= 0.5",
+            )
         if not 0.0 <= self.drop_rate < 1.0:
             raise ConfigError.invalid(
                 "sensors.timing.drop_rate",
@@ -187,6 +208,12 @@ class SensorsConfig:
     timing: TimingConfig = field(default_factory=TimingConfig)
     drift: DriftConfig = field(default_factory=DriftConfig)
     shutter: ShutterConfig = field(default_factory=ShutterConfig)
+
+    @property
+    def lagged(self) -> bool:
+        """Frames may show the scene before the tick that delivers them (spread or delay)."""
+        t = self.timing
+        return t.enabled and (t.exposure_spread_s > 0 or t.delay_s > 0 or t.delay_jitter_s > 0)
 
     @property
     def active(self) -> bool:

@@ -225,6 +225,7 @@ def camera_effects(
     exposure_time_s: float = 0.0,
     line_time_s: float = 0.0,
     subframes: int = 1,
+    delay_s: float = 0.0,
 ) -> Any:
     """simlan_msgs/CameraEffects: what the camera stage did to one frame (``sim/sensors.py``)."""
     x, y, z = (float(v) for v in true_pose.translation)
@@ -240,6 +241,7 @@ def camera_effects(
         line_time_s=float(line_time_s),
         subframes=int(subframes),
         true_pose=pose_msg(x, y, z, [float(q) for q in true_pose.quat()]),
+        delay_s=float(delay_s),
     )
 
 

@@ -8,7 +8,9 @@ turning one effect on or off leaves the others' draws alone):
   pose, everything recorded and every algorithm keeps the believed one;
 - **timing**: a constant clock offset per camera and a jitter per frame on the stamp the camera
   writes (the header stamp: when the camera *says* it exposed); a frame is lost with
-  ``drop_rate`` (nothing recorded, nothing reaches an algorithm);
+  ``drop_rate`` (nothing recorded, nothing reaches an algorithm); a free-running camera exposes
+  a constant phase before the tick that delivers its frame, and each frame travels a transport
+  delay: the frame shows the scene ``lag_s()`` before it arrives (``sim/history.py``);
 - **photometric**: ``imaging.sensor_model.SensorModel`` on the colour image (noise, gain,
   exposure, vignetting, quantization).
 
@@ -117,6 +119,7 @@ class Capture:
     gain: float
     light: float  # the scene's light relative to the rendered (sensors.photometric.lighting)
     subframes: int = 1  # renders averaged into the image (motion blur, rolling shutter)
+    exposed_ns: int = -1  # simulated time its exposure truly ended (the tick less phase and delay)
 
 
 class CameraSensor:
@@ -155,21 +158,38 @@ class CameraSensor:
                 float(run_rng(seed, "camera_clock", cid).normal(0.0, t.clock_offset_s)) * 1e9
             )
         self._frames = run_rng(seed, "camera_frames", cid)  # jitter and drops, one draw of each per frame
+        self.phase_s = 0.0  # a free-running camera exposes this long before the tick (constant)
+        if t.enabled and t.exposure_spread_s > 0:
+            self.phase_s = float(run_rng(seed, "camera_phase", cid).uniform(0.0, t.exposure_spread_s))
+        self._delays = run_rng(seed, "camera_delay", cid)  # transport delay, one draw per frame
+
+    def lag_s(self) -> float:
+        """How long before the tick the next frame's exposure ended: the camera's phase plus this
+        frame's transport delay (call once per frame, before rendering it)."""
+        t = self.cfg.timing
+        if not (t.enabled and (t.exposure_spread_s > 0 or t.delay_s > 0 or t.delay_jitter_s > 0)):
+            return 0.0
+        delay = t.delay_s + float(self._delays.normal(0.0, 1.0)) * t.delay_jitter_s
+        return self.phase_s + max(0.0, delay)
 
     def exposure_time_s(self) -> float:
         """The exposure time of the next frame (``sensors.shutter.exposure_s`` x auto-exposure)."""
         return self.cfg.shutter.exposure_s * self.exposure.exposure
 
-    def capture(self, t_ns: int, frame_index: int, images: CameraImages, *, subframes: int = 1) -> Capture:
+    def capture(
+        self, t_ns: int, frame_index: int, images: CameraImages, *, subframes: int = 1, lag_ns: int = 0
+    ) -> Capture:
+        """The frame delivered at the tick ``t_ns``, whose exposure ended ``lag_ns`` before it."""
         t, p = self.cfg.timing, self.cfg.photometric
         jitter, lost = self._frames.normal(0.0, 1.0), self._frames.random()
-        stamp = t_ns
+        exposed = t_ns - lag_ns
+        stamp = exposed
         dropped = False
         if t.enabled:
-            stamp = t_ns + self.offset_ns + round(jitter * t.clock_jitter_s * 1e9)
+            stamp = exposed + self.offset_ns + round(jitter * t.clock_jitter_s * 1e9)
             dropped = bool(lost < t.drop_rate)
         phase, exposure, gain = -1, p.exposure_scale, p.gain
-        light = p.light_at(t_ns / 1e9) if p.enabled else 1.0
+        light = p.light_at(exposed / 1e9) if p.enabled else 1.0
         if self.model is not None and images.rgb is not None and not dropped:
             exposure, gain = self.exposure.settings(images.rgb, light)
             rgb = self.model.apply(images.rgb, frame_index, exposure_scale=exposure * light, gain=gain)
@@ -181,4 +201,4 @@ class CameraSensor:
             changed = images.changed or (self._settings is not None and self._settings != now)
             self._settings = now
             images = replace(images, rgb=rgb, changed=changed)
-        return Capture(images, stamp, dropped, phase, exposure, gain, light, subframes)
+        return Capture(images, stamp, dropped, phase, exposure, gain, light, subframes, exposed)

@@ -37,6 +37,7 @@ from simlan_data.algorithms.stack import AgentPlan, ControlOutput, GpssStack, Na
 from simlan_data.config.algorithms import selected_algorithm
 from simlan_data.config.faults import CameraFaults
 from simlan_data.config.schema import Config
+from simlan_data.config.sensors import MAX_LAG_S
 from simlan_data.constants import FORMAT_VERSION, NS_PER_S
 from simlan_data.errors import PluginError
 from simlan_data.geometry.camera import CameraModel
@@ -46,12 +47,14 @@ from simlan_data.recording.writer import NullWriter, RecordingWriter, WriteListe
 from simlan_data.sim.agent_base import CollisionReading
 from simlan_data.sim.birdseye_live import BirdseyeRecorder
 from simlan_data.sim.camera_recording import CameraRecorder
+from simlan_data.sim.dynamic_layer import MovedAgents
+from simlan_data.sim.history import PoseHistory
 from simlan_data.sim.posemap_drive import PoseDriver, make_driver
 from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.sim.scene import Inputs, Scene
 from simlan_data.sim.sensors import CameraSensor, camera_sensors
-from simlan_data.sim.shutter import expose
+from simlan_data.sim.shutter import expose, expose_lagged
 from simlan_data.world._pybullet import pb
 
 
@@ -311,6 +314,8 @@ class Simulation:
                 run.pub.ground_truth(t)
             if run.driver is not None and step % self.control_every == 0:
                 run.driver.control_tick(t)  # before the cameras: the images at t show the pose at t
+            if run.history is not None:
+                run.history.record(t)
             if step % self.camera_every == 0:
                 self._camera_tick(run, step, t)
                 if progress is not None:
@@ -349,7 +354,12 @@ class Simulation:
         driver = make_driver(cfg, scene.agents, writer, self.inputs.posemap)  # motion files or the drive
         true_cameras = [r.camera for r in scene.renderers]  # (drifted once, where the scene built them)
         sensors = camera_sensors(cfg.sensors, cfg.seed, scene.cameras, true_cameras)
-        return _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
+        run = _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
+        if cfg.sensors.lagged:  # frames show the scene before their tick: keep the agents' past
+            run.history = PoseHistory(scene.agents, MAX_LAG_S + 0.05, scene.client.id)
+            if scene.moved is not None:
+                run.drawn = [MovedAgents(scene.agents) for _ in scene.renderers]
+        return run
 
     def _camera_tick(self, run: _Run, step: int, t: int) -> None:
         """Render and record every camera, then localize and detect people on the frames."""
@@ -370,18 +380,31 @@ class Simulation:
             moved = scene.moved_boxes()
             return [renderer.render(moved) for renderer in scene.renderers]
 
-        # the agents' motion within each camera's exposure (sensors.shutter), or one render
+        # the agents' motion within each camera's exposure (sensors.shutter), or one render;
+        # late cameras (sensors.timing: phase, delay) each at the agents' poses when they exposed
         exposures = [sensor.exposure_time_s() for sensor in run.sensors]
-        rendered, subframes = expose(
-            self.cfg.sensors.shutter, scene.agents, scene.cameras, exposures, render_all
-        )
+        # (no frame shows the scene before the run began: the first ticks' lags end at t = 0)
+        lags = [min(sensor.lag_s(), t / NS_PER_S) for sensor in run.sensors]
+        if run.history is not None:
+            rendered, counts = expose_lagged(
+                self.cfg.sensors.shutter, run.history, t, scene.cameras, exposures, lags,
+                lambda i: self._render_one(run, i),
+            )  # fmt: skip
+            subframes = max(counts, default=1)
+        else:
+            rendered, subframes = expose(
+                self.cfg.sensors.shutter, scene.agents, scene.cameras, exposures, render_all
+            )
+            counts = [subframes] * len(rendered)
         stats.camera_subframes += subframes
         frames = []
         index = step // self.camera_every
-        for images, camera, sensor in zip(rendered, scene.cameras, run.sensors, strict=True):
+        for images, camera, sensor, k, lag in zip(
+            rendered, scene.cameras, run.sensors, counts, lags, strict=True
+        ):
             stats.camera_frames += 1
             stats.camera_frames_changed += int(images.changed)
-            shot = sensor.capture(t, index, images, subframes=subframes)
+            shot = sensor.capture(t, index, images, subframes=k, lag_ns=round(lag * NS_PER_S))
             run.pub.camera_effects(t, camera, shot, sensor)
             if shot.dropped:
                 stats.camera_frames_dropped += 1
@@ -405,6 +428,13 @@ class Simulation:
         if run.driver is not None:
             run.driver.camera_tick(t, index, [(f.camera, f.images) for f in frames])
         return frames
+
+    def _render_one(self, run: _Run, i: int) -> CameraImages:
+        """Camera ``i`` at the agents' current (placed) poses: it redraws what moved since it last
+        drew (its own tracker: late cameras each see the agents at other instants)."""
+        scene = run.scene
+        boxes = run.drawn[i].boxes() if run.drawn else scene.agent_aabbs()
+        return scene.renderers[i].render(boxes)
 
     def _localize(self, run: _Run, t: int, frames: list[_Frame]) -> None:
         """Hand the frames to the localizer and person detector in camera order; publish detections."""
@@ -499,3 +529,5 @@ class _Run:
     last_xy: dict[str, np.ndarray]
     sensors: list[CameraSensor]  # the camera stage, per camera (sensors: ideal passes images through)
     delivered: dict[str, CameraImages]  # per camera, the last frame that was not lost
+    history: PoseHistory | None = None  # the agents' recent past (late cameras: sensors.timing)
+    drawn: list[MovedAgents] = field(default_factory=list)  # per camera: what it last drew (late cameras)
