@@ -336,6 +336,8 @@ class Simulation:
         cfg = self.cfg
         pub = Publisher(writer, cfg, scene.agents)
         pub.static(config_yaml=self.config_yaml, renderer=scene.client.backend, cameras=scene.cameras)
+        if scene.randomizer is not None:  # what randomize drew (once; randomize=off: nothing)
+            scene.randomizer.publish(writer)
         stack = self._stack(scene)
         pub.safety_zones(getattr(stack.safety, "zones", ()))  # a monitor's restricted areas, if it has any
         recorder = CameraRecorder(
