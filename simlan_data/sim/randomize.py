@@ -76,6 +76,7 @@ SKYLIGHT_COUNT = (10, 5)
 MIN_SUN_ELEVATION = 0.05  # sin(elevation) below which (3 degrees) no patch is drawn
 FLOOR, SHELF = SEMANTIC_CLASSES["floor"], SEMANTIC_CLASSES["shelf"]
 FLOOR_LABELS = (FLOOR, SEMANTIC_CLASSES["floor_marking"])
+_FLOOR_TABLE = np.isin(np.arange(256), FLOOR_LABELS)  # label id -> shows the floor
 DISTRACTOR_LABEL = "furniture"  # an existing class: the recorded label table stays as it was
 MARKER_LINK_PREFIX = "aruco_marker"  # sim/markers.py: the marker's links keep their colours
 ROUTE_MARGIN_M = 0.3  # what an agent's corridor keeps beyond its half width and clearance
@@ -238,8 +239,8 @@ def replay_world(client: int, world: WorldBodies, record: Mapping[str, Any]) -> 
 class _CameraSun:
     """One camera's sunlit floor pixels (fixed for the run) and the floor's depth there."""
 
-    lit: NDArray[np.bool_]  # (H, W)
-    floor_depth_m: NDArray[np.float32]  # (H, W), 0 outside ``lit``
+    lit: NDArray[np.intp]  # flat indices of the pixels whose floor point is in a patch
+    floor_depth_m: NDArray[np.float32]  # the floor's depth (camera z) at those pixels
 
 
 class _Reuse:
@@ -327,12 +328,11 @@ class Randomizer:
         u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
         uv = np.stack([u.ravel(), v.ravel()], axis=1)
         points, ok = cam.intersect_plane_z(uv, 0.0, distorted=distorted)
-        lit = ok & in_patches(points[:, :2], self._offset_xy)
-        depth = np.zeros(len(uv), dtype=np.float32)
-        if lit.any():
-            depth[lit] = cam.world_to_camera(points[lit])[:, 2]
-        shape = (cam.height, cam.width)
-        return _CameraSun(lit.reshape(shape), depth.reshape(shape))
+        lit = np.flatnonzero(ok & in_patches(points[:, :2], self._offset_xy))
+        depth = (
+            cam.world_to_camera(points[lit])[:, 2].astype(np.float32) if len(lit) else np.zeros(0, np.float32)
+        )
+        return _CameraSun(lit, depth)
 
     def post_render(self, index: int, images: CameraImages) -> CameraImages:
         """Camera ``index``'s images under the drawn light and sun (the same object when both are off)."""
@@ -341,25 +341,29 @@ class Randomizer:
         last = self._last[index]
         if last is not None and last.same(images):
             return replace(images, rgb=last.out)  # the renderer reused its last images
-        out: NDArray[np.uint8] = np.asarray(cv2.LUT(images.rgb, self._base_lut), dtype=np.uint8)
+        out: NDArray[np.uint8] = (
+            np.asarray(cv2.LUT(images.rgb, self._base_lut), dtype=np.uint8)
+            if "light" in self.drawn
+            else images.rgb.copy()  # (the sun alone)
+        )
         lit = self._sunlit(index, images)
-        if lit is not None and self._sun_lut is not None:
-            np.copyto(out, cv2.LUT(images.rgb, self._sun_lut), where=lit[..., None])
+        if lit is not None and self._sun_lut is not None and len(lit):
+            # (only the patch pixels: about a tenth of the image, 3x cheaper than a masked copy)
+            colours = images.rgb.reshape(-1, 3)[lit]
+            out.reshape(-1, 3)[lit] = cv2.LUT(colours.reshape(-1, 1, 3), self._sun_lut).reshape(-1, 3)
         self._last[index] = _Reuse(images.rgb, images.labels, images.depth_m, out)
         return replace(images, rgb=out)
 
-    def _sunlit(self, index: int, images: CameraImages) -> NDArray[np.bool_] | None:
-        """The pixels of this frame that show a sunlit floor patch."""
+    def _sunlit(self, index: int, images: CameraImages) -> NDArray[np.intp] | None:
+        """Flat indices of the pixels of this frame that show a sunlit floor patch."""
         sun = self._suns[index]
         if sun is None:
             return None
         if images.labels is not None:
-            floor = np.zeros(256, dtype=bool)
-            floor[list(FLOOR_LABELS)] = True
-            return sun.lit & floor[images.labels]
+            return sun.lit[_FLOOR_TABLE[images.labels.reshape(-1)[sun.lit]]]
         if images.depth_m is not None:
             tolerance = FLOOR_TOLERANCE_M + 0.01 * sun.floor_depth_m
-            return sun.lit & (np.abs(images.depth_m - sun.floor_depth_m) <= tolerance)
+            return sun.lit[np.abs(images.depth_m.reshape(-1)[sun.lit] - sun.floor_depth_m) <= tolerance]
         return sun.lit
 
     # ----------------------------------------------------------------------------- the scene
