@@ -80,6 +80,7 @@ _FLOOR_TABLE = np.isin(np.arange(256), FLOOR_LABELS)  # label id -> shows the fl
 DISTRACTOR_LABEL = "furniture"  # an existing class: the recorded label table stays as it was
 MARKER_LINK_PREFIX = "aruco_marker"  # sim/markers.py: the marker's links keep their colours
 ROUTE_MARGIN_M = 0.3  # what an agent's corridor keeps beyond its half width and clearance
+SUN_GRID_PX = 4  # floor points of the sun's patches: intersected every 4 pixels, interpolated between
 FLOOR_TOLERANCE_M = 0.05  # depth within this (plus 1 %) of the floor's: the floor is seen
 
 
@@ -323,16 +324,24 @@ class Randomizer:
         return len(self._suns) - 1
 
     def _sun_pixels(self, cam: CameraModel, *, distorted: bool) -> _CameraSun | None:
+        """The pixels whose floor point lies in a patch: floor points (and depths) intersected on a
+        grid every ``SUN_GRID_PX`` pixels, interpolated between (the lens model is smooth; a
+        full-resolution intersection costs 0.7 s per 960x540 camera, this 16 times less)."""
         if self._offset_xy is None:
             return None
-        u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
-        uv = np.stack([u.ravel(), v.ravel()], axis=1)
-        points, ok = cam.intersect_plane_z(uv, 0.0, distorted=distorted)
-        lit = np.flatnonzero(ok & in_patches(points[:, :2], self._offset_xy))
-        depth = (
-            cam.world_to_camera(points[lit])[:, 2].astype(np.float32) if len(lit) else np.zeros(0, np.float32)
-        )
-        return _CameraSun(lit, depth)
+        step = SUN_GRID_PX
+        gu = np.arange(0, cam.width + step - 1, step, dtype=np.float64)
+        gv = np.arange(0, cam.height + step - 1, step, dtype=np.float64)
+        u, v = np.meshgrid(gu, gv)
+        points, ok = cam.intersect_plane_z(np.stack([u.ravel(), v.ravel()], axis=1), 0.0, distorted=distorted)
+        depth = np.where(ok, cam.world_to_camera(points)[:, 2], 0.0)
+        grid = np.stack([points[:, 0], points[:, 1], depth, ok], axis=1).astype(np.float32)
+        grid = grid.reshape(len(gv), len(gu), 4)
+        px, py = np.meshgrid(np.arange(cam.width, dtype=np.float32), np.arange(cam.height, dtype=np.float32))
+        full = cv2.remap(grid, px / step, py / step, cv2.INTER_LINEAR).reshape(-1, 4)
+        inside = full[:, 3] > 0.999  # (all four grid neighbours see the floor)
+        lit = np.flatnonzero(inside & in_patches(full[:, :2].astype(np.float64), self._offset_xy))
+        return _CameraSun(lit, full[lit, 2].astype(np.float32))
 
     def post_render(self, index: int, images: CameraImages) -> CameraImages:
         """Camera ``index``'s images under the drawn light and sun (the same object when both are off)."""
