@@ -67,6 +67,8 @@ def plot_effect(
             ax.axvline(v.breaks_at, color="tab:red", ls=":", lw=1)
         if _log_axis(effect.values):
             ax.set_xscale("log")
+        else:  # the swept strengths as ticks, written short (3e-05, not 0.000030)
+            ax.set_xticks(list(effect.values), [f"{x:g}" for x in effect.values])
         ax.set_title(
             f"{v.metric}\n{v.text()}", fontsize=7, color="tab:red" if v.breaks_at is not None else "black"
         )
