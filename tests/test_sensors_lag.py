@@ -10,9 +10,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-import pybullet as pb
-import pybullet_data
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -78,37 +75,3 @@ def test_a_delay_of_one_period_delivers_the_previous_ticks_image_stamped_with_it
     assert ideal_truth == late_truth  # rendering the past never touched the physics
     assert sorted(set(delays.values()))[-1] == pytest.approx(PERIOD_S)
 
-
-def test_the_pose_history_puts_a_body_where_it_was_between_two_steps() -> None:
-    from simlan_data.sim.history import PoseHistory
-
-    cid = pb.connect(pb.DIRECT)
-    try:
-        pb.setAdditionalSearchPath(pybullet_data.getDataPath(), physicsClientId=cid)
-        pb.setGravity(0, 0, -9.81, physicsClientId=cid)
-        body = pb.loadURDF("r2d2.urdf", [0, 0, 1.0], physicsClientId=cid)
-
-        class _Agent:  # what PoseHistory reads of an agent
-            client = cid
-
-        agent = _Agent()
-        agent.body = body  # type: ignore[attr-defined]
-        pb.resetBaseVelocity(body, [1.0, 0.0, 0.0], [0.0, 0.0, 2.0], physicsClientId=cid)
-        history = PoseHistory([agent], keep_s=1.0, client=cid)  # type: ignore[list-item]
-        poses = []
-        for step in range(4):
-            history.record(step * 10_000_000)
-            poses.append(pb.getBasePositionAndOrientation(body, physicsClientId=cid))
-            pb.stepSimulation(physicsClientId=cid)
-        history.place(10_000_000)  # a recorded instant: exactly there
-        pos, orn = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
-        np.testing.assert_allclose(pos, poses[1][0], atol=1e-9)
-        np.testing.assert_allclose(orn, poses[1][1], atol=1e-9)
-        history.place(15_000_000)  # half-way: half-way (linear), on the line between
-        pos, _ = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
-        np.testing.assert_allclose(pos, (np.array(poses[1][0]) + poses[2][0]) / 2, atol=1e-9)
-        history.place(-5)  # before the first record: the first
-        pos, _ = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
-        np.testing.assert_allclose(pos, poses[0][0], atol=1e-9)
-    finally:
-        pb.disconnect(cid)

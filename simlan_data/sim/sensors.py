@@ -10,7 +10,7 @@ turning one effect on or off leaves the others' draws alone):
   writes (the header stamp: when the camera *says* it exposed); a frame is lost with
   ``drop_rate`` (nothing recorded, nothing reaches an algorithm); a free-running camera exposes
   a constant phase before the tick that delivers its frame, and each frame travels a transport
-  delay: the frame shows the scene ``lag_s()`` before it arrives (``sim/history.py``);
+  delay: the frame shows the scene ``lag_s()`` before it arrives (``sim/exposures.py``);
 - **photometric**: ``imaging.sensor_model.SensorModel`` on the colour image (noise, gain,
   exposure, vignetting, quantization).
 

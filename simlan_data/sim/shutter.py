@@ -30,7 +30,6 @@ from numpy.typing import NDArray
 from simlan_data.config.sensors import ShutterConfig
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.sim.agents import Agent
-from simlan_data.sim.history import PoseHistory
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.world._pybullet import pb
 
@@ -176,45 +175,3 @@ def expose(
         rgb = combine([s[i].rgb for s in subs], w)  # type: ignore[misc]
         out.append(CameraImages(rgb, last.depth_m, last.labels, changed=any(s[i].changed for s in subs)))
     return out, k
-
-
-def expose_lagged(
-    cfg: ShutterConfig,
-    history: PoseHistory,
-    t_ns: int,
-    cameras: Sequence[CameraModel],
-    exposures_s: Sequence[float],
-    lags_s: Sequence[float],
-    render_one: Callable[[int], CameraImages],
-) -> tuple[list[CameraImages], list[int]]:
-    """Every camera's images when its exposure ended ``lags_s[i]`` before the tick ``t_ns`` (its
-    phase and transport delay), and the sub-frames each rendered.
-
-    Camera ``i``'s sub-frames put the agents where ``history`` had them at ``t - lag - d`` for the
-    offsets ``d`` over its exposure window (as ``expose``), and ``render_one(i)`` draws it there;
-    the simulation is restored afterwards. Depth and labels are those at the exposure's end.
-    """
-    motions = moving(history.agents) if cfg.enabled else []
-    client = history.client
-    out, counts = [], []
-    state = pb.saveState(physicsClientId=client)
-    try:
-        for i, (cam, e, lag) in enumerate(zip(cameras, exposures_s, lags_s, strict=True)):
-            span = window_s(cfg, e, cam.height) if cfg.enabled else 0.0
-            k = samples(cfg, motions, [cam], span) if motions else 1
-            back = offsets(span, k)
-            subs = []
-            for d in back:
-                history.place(t_ns - round((lag + float(d)) * 1e9))
-                subs.append(render_one(i))
-            last = subs[-1]
-            if k > 1 and last.rgb is not None:
-                w = row_weights(back, cam.height, e, cfg.line_time_s)
-                rgb = combine([s.rgb for s in subs], w)  # type: ignore[misc]
-                last = CameraImages(rgb, last.depth_m, last.labels, changed=any(s.changed for s in subs))
-            out.append(last)
-            counts.append(k)
-    finally:
-        pb.restoreState(stateId=state, physicsClientId=client)
-        pb.removeState(state, physicsClientId=client)
-    return out, counts

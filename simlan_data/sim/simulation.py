@@ -37,7 +37,6 @@ from simlan_data.algorithms.stack import AgentPlan, ControlOutput, GpssStack, Na
 from simlan_data.config.algorithms import selected_algorithm
 from simlan_data.config.faults import CameraFaults
 from simlan_data.config.schema import Config
-from simlan_data.config.sensors import MAX_LAG_S
 from simlan_data.constants import FORMAT_VERSION, NS_PER_S
 from simlan_data.errors import PluginError
 from simlan_data.geometry.camera import CameraModel
@@ -48,13 +47,13 @@ from simlan_data.sim.agent_base import CollisionReading
 from simlan_data.sim.birdseye_live import BirdseyeRecorder
 from simlan_data.sim.camera_recording import CameraRecorder
 from simlan_data.sim.dynamic_layer import MovedAgents
-from simlan_data.sim.history import PoseHistory
+from simlan_data.sim.exposures import Exposed, ExposureSchedule
 from simlan_data.sim.posemap_drive import PoseDriver, make_driver
 from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.sim.scene import Inputs, Scene
 from simlan_data.sim.sensors import CameraSensor, camera_sensors
-from simlan_data.sim.shutter import expose, expose_lagged
+from simlan_data.sim.shutter import expose
 from simlan_data.world._pybullet import pb
 
 
@@ -314,8 +313,9 @@ class Simulation:
                 run.pub.ground_truth(t)
             if run.driver is not None and step % self.control_every == 0:
                 run.driver.control_tick(t)  # before the cameras: the images at t show the pose at t
-            if run.history is not None:
-                run.history.record(t)
+            if run.schedule is not None:  # late cameras expose now, their frames wait for their tick
+                for camera, delivery in run.schedule.exposing(step):
+                    self._expose_one(run, camera, delivery, step)
             if step % self.camera_every == 0:
                 self._camera_tick(run, step, t)
                 if progress is not None:
@@ -358,7 +358,9 @@ class Simulation:
         sensors = camera_sensors(cfg.sensors, cfg.seed, scene.cameras, true_cameras)
         run = _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
         if cfg.sensors.lagged:  # frames show the scene before their tick: keep the agents' past
-            run.history = PoseHistory(scene.agents, MAX_LAG_S + 0.05, scene.client.id)
+            t = cfg.sensors.timing
+            worst = t.exposure_spread_s + t.delay_s + 4 * t.delay_jitter_s
+            run.schedule = ExposureSchedule(sensors, self.camera_every, self.physics_hz, worst)
             if scene.moved is not None:
                 run.drawn = [MovedAgents(scene.agents) for _ in scene.renderers]
         return run
@@ -376,28 +378,24 @@ class Simulation:
         """Render, pass through the camera stage, record and start searching each camera; feed the
         bird's-eye stitcher and the driver."""
         scene, stats, stack = run.scene, run.stats, run.stack
-        scene.refresh_static_layers()
-
-        def render_all() -> list[CameraImages]:
-            moved = scene.moved_boxes()
-            return [renderer.render(moved) for renderer in scene.renderers]
-
-        # the agents' motion within each camera's exposure (sensors.shutter), or one render;
-        # late cameras (sensors.timing: phase, delay) each at the agents' poses when they exposed
-        exposures = [sensor.exposure_time_s() for sensor in run.sensors]
-        # (no frame shows the scene before the run began: the first ticks' lags end at t = 0)
-        lags = [min(sensor.lag_s(), t / NS_PER_S) for sensor in run.sensors]
-        if run.history is not None:
-            rendered, counts = expose_lagged(
-                self.cfg.sensors.shutter, run.history, t, scene.cameras, exposures, lags,
-                lambda i: self._render_one(run, i),
-            )  # fmt: skip
+        if run.schedule is not None:  # late cameras: rendered when they exposed (_expose_one)
+            held = run.schedule.deliver(step)
+            rendered, counts = [f.images for f in held], [f.subframes for f in held]
+            lags = [run.schedule.lag_ns(f, step) for f in held]
             subframes = max(counts, default=1)
         else:
+            scene.refresh_static_layers()
+
+            def render_all() -> list[CameraImages]:
+                moved = scene.moved_boxes()
+                return [renderer.render(moved) for renderer in scene.renderers]
+
+            # the agents' motion within each camera's exposure (sensors.shutter), or one render
+            exposures = [sensor.exposure_time_s() for sensor in run.sensors]
             rendered, subframes = expose(
                 self.cfg.sensors.shutter, scene.agents, scene.cameras, exposures, render_all
             )
-            counts = [subframes] * len(rendered)
+            counts, lags = [subframes] * len(rendered), [0] * len(rendered)
         stats.camera_subframes += subframes
         frames = []
         index = step // self.camera_every
@@ -406,7 +404,7 @@ class Simulation:
         ):
             stats.camera_frames += 1
             stats.camera_frames_changed += int(images.changed)
-            shot = sensor.capture(t, index, images, subframes=k, lag_ns=round(lag * NS_PER_S))
+            shot = sensor.capture(t, index, images, subframes=k, lag_ns=lag)
             run.pub.camera_effects(t, camera, shot, sensor)
             if shot.dropped:
                 stats.camera_frames_dropped += 1
@@ -431,12 +429,20 @@ class Simulation:
             run.driver.camera_tick(t, index, [(f.camera, f.images) for f in frames])
         return frames
 
-    def _render_one(self, run: _Run, i: int) -> CameraImages:
-        """Camera ``i`` at the agents' current (placed) poses: it redraws what moved since it last
-        drew (its own tracker: late cameras each see the agents at other instants)."""
-        scene = run.scene
-        boxes = run.drawn[i].boxes() if run.drawn else scene.agent_aabbs()
-        return scene.renderers[i].render(boxes)
+    def _expose_one(self, run: _Run, i: int, delivery: int, step: int) -> None:
+        """Late camera ``i`` exposes now (its frame for the tick at ``delivery``): render it as the
+        scene is (over its exposure: sensors.shutter) and hold it until then. It redraws what moved
+        since it last drew (its own tracker: the cameras draw at different steps)."""
+        assert run.schedule is not None
+        scene, renderer = run.scene, run.scene.renderers[i]
+        scene.refresh_static_layers()
+
+        def render() -> list[CameraImages]:
+            return [renderer.render(run.drawn[i].boxes() if run.drawn else scene.agent_aabbs())]
+
+        exposure = run.sensors[i].exposure_time_s()
+        (images,), k = expose(self.cfg.sensors.shutter, scene.agents, [scene.cameras[i]], [exposure], render)
+        run.schedule.hold(i, delivery, Exposed(images, step, k))
 
     def _localize(self, run: _Run, t: int, frames: list[_Frame]) -> None:
         """Hand the frames to the localizer and person detector in camera order; publish detections."""
@@ -531,5 +537,5 @@ class _Run:
     last_xy: dict[str, np.ndarray]
     sensors: list[CameraSensor]  # the camera stage, per camera (sensors: ideal passes images through)
     delivered: dict[str, CameraImages]  # per camera, the last frame that was not lost
-    history: PoseHistory | None = None  # the agents' recent past (late cameras: sensors.timing)
+    schedule: ExposureSchedule | None = None  # late cameras: when each exposes (sensors.timing)
     drawn: list[MovedAgents] = field(default_factory=list)  # per camera: what it last drew (late cameras)
