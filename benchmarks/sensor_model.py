@@ -7,10 +7,14 @@
 gradient with texture; the model's cost does not depend on the content). Median of ``--repeats``
 calls (after warm-up) of:
 
-- a full recompute (the exposure alternates between two values, so no row is reused);
-- an unchanged frame (the same frame again in a warmed phase: a row compare and a copy);
-- a frame with 20 % of its rows changed (four bands of 27 rows, as moving robots change a few
-  image rows; the same phase, alternating between two frames that differ in those rows);
+- a full recompute (the exposure alternates between two values, so no pixel is reused);
+- an unchanged frame (the same frame again in a warmed phase: a block compare, the cached image
+  handed out), and the same when the caller says so (``changed=False``: not even compared);
+- a frame with 20 % of its rows changed over the whole width (four bands of 27 rows; the same
+  phase, alternating between two frames that differ in those rows);
+- a robot-sized patch (60 x 60 pixels) moving 6 pixels a frame through the 8 phases, as a
+  ceiling camera sees a robot: each frame recomputes the blocks the patch touched since that
+  phase's last frame;
 - for reference, fresh noise every frame (``noise_phases = 0``: drawing the Gaussian field each
   frame, no caching).
 
@@ -55,6 +59,16 @@ def frames() -> tuple[np.ndarray, np.ndarray]:
     return base, moved
 
 
+def moving_patch(base: np.ndarray, frames: int) -> list[np.ndarray]:
+    """``base`` with a 60 x 60 patch 6 pixels further right in each frame."""
+    out = []
+    for i in range(frames):
+        f = base.copy()
+        f[240:300, 200 + 6 * i : 260 + 6 * i] = (200, 60, 40)
+        out.append(f)
+    return out
+
+
 def median_ms(step: Callable[[int], object], repeats: int) -> float:
     for i in range(5):
         step(i)
@@ -78,12 +92,20 @@ def measure(repeats: int) -> dict[str, float]:
     unchanged = sensor()
     for k in range(params.noise_phases):  # warm every phase
         unchanged.apply(base, k)
+    said = sensor()
+    for k in range(params.noise_phases):
+        said.apply(base, k)
     partial = sensor()
+    patch, patches = sensor(), moving_patch(base, repeats + 13)
+    for k in range(params.noise_phases):
+        patch.apply(patches[k], k)
     fresh = sensor(replace(params, noise_phases=0))
     return {
         "full_ms": median_ms(lambda i: full.apply(base, 0, exposure_scale=1.0 if i % 2 else 0.999), repeats),
         "unchanged_ms": median_ms(lambda i: unchanged.apply(base, i), repeats),
+        "unchanged_said_ms": median_ms(lambda i: said.apply(base, i + 8, changed=False), repeats),
         "rows20_ms": median_ms(lambda i: partial.apply(moved if i % 2 else base, 0), repeats),
+        "patch_ms": median_ms(lambda i: patch.apply(patches[i + 8], i + 8), repeats),
         "fresh_noise_ms": median_ms(lambda i: fresh.apply(base, i), repeats),
     }
 
@@ -94,10 +116,13 @@ def figures(r: dict[str, float], repeats: int) -> list[dict]:
     return [
         {"id": "sensor_full", "figure": "sensor model: full recompute of a frame", "value": round(r["full_ms"], 2),
          "note": note + f"; fresh noise every frame (noise_phases=0): {r['fresh_noise_ms']:.1f} ms", **common},
-        {"id": "sensor_unchanged", "figure": "sensor model: unchanged frame (row compare + copy)",
-         "value": round(r["unchanged_ms"], 3), "note": note, **common},
+        {"id": "sensor_unchanged", "figure": "sensor model: unchanged frame (block compare, cached image)",
+         "value": round(r["unchanged_ms"], 3),
+         "note": note + f"; said unchanged (changed=False, no compare): {r['unchanged_said_ms']:.3f} ms", **common},
         {"id": "sensor_rows20", "figure": "sensor model: frame with 20 % of its rows changed",
          "value": round(r["rows20_ms"], 2), "note": note, **common},
+        {"id": "sensor_patch", "figure": "sensor model: a 60x60 patch moving 6 px a frame (a robot)",
+         "value": round(r["patch_ms"], 2), "note": note, **common},
     ]  # fmt: skip
 
 
@@ -117,7 +142,7 @@ def main() -> None:
     result = {
         "command": f"python benchmarks/sensor_model.py --repeats {args.repeats}",
         "machine": machine(),
-        "date": datetime.date.today().isoformat(),
+        "date": datetime.datetime.now().isoformat(timespec="minutes"),  # (a rerun the same day wins)
         "conditions": f"load average {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end",
         "history": "docs/benchmarks/sensors.md",
         "ms_per_frame": r,

@@ -9,17 +9,22 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from simlan_data.config.sensors import PhotometricConfig
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.imaging.sensor_model import (
+    CHUNK_PX,
     NOISE_SCALE,
     NoiseBank,
     PhotometricParams,
     SensorModel,
+    changed_blocks,
+    dirty_rects,
     realistic_defaults,
     vignetting_map,
 )
 from simlan_data.seeding import run_rng
+from simlan_data.sim.sensors import AutoExposure
 
 H, W = 540, 960
 # a small full well keeps the 8-bit output's code step well below the noise (test 1)
@@ -149,6 +154,84 @@ def test_equal_seeds_equal_outputs_and_the_row_cache_is_exact(camera) -> None:
     assert np.array_equal(dimmer, model(camera, NOISY).apply(changed, 17, exposure_scale=0.5))
     other = model(camera, NOISY, seed=8).apply(base, 0)
     assert np.mean(other != outs_a[0]) > 0.5
+
+
+def test_a_small_change_recomputes_only_its_blocks_exactly_and_never_alters_an_image_handed_out(
+    camera,
+) -> None:
+    rng = np.random.default_rng(4)
+    base = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    moved = base.copy()
+    moved[200:231, 300:341] = rng.integers(0, 256, (31, 41, 3), dtype=np.uint8)  # a robot's patch
+    a = model(camera, NOISY)
+    outs = [a.apply(base, i) for i in range(9)]
+    kept = outs[1].copy()
+    out9 = a.apply(moved, 9)  # phase 1 again: only the patch's blocks recomputed
+    assert np.array_equal(out9, model(camera, NOISY).apply(moved, 9))  # exact
+    rows, cols = np.nonzero((out9 != outs[1]).any(axis=2))
+    assert rows.min() >= 200 and rows.max() <= 230 and cols.min() >= 300 and cols.max() <= 340
+    assert out9 is not outs[1] and np.array_equal(outs[1], kept)  # copy on write
+    assert not out9.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        out9[0, 0] = 0
+    # the other phases catch up with the patch once; then phase 1 hands out the same array again
+    later = [a.apply(moved, i, changed=False) for i in range(10, 17)]
+    assert all(out is not outs[i - 8] for i, out in zip(range(10, 17), later, strict=True))
+    assert a.apply(moved, 17, changed=False) is out9
+    # once nobody holds phase 1's image, its next change is written into that array in place
+    ident = id(out9)
+    del out9, outs, later
+    back = a.apply(base, 25)
+    assert id(back) == ident and np.array_equal(back, model(camera, NOISY).apply(base, 25))
+
+
+def test_changed_false_is_not_trusted_across_a_skipped_frame(camera) -> None:
+    rng = np.random.default_rng(5)
+    base = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    moved = base.copy()
+    moved[400:420, 700:760] = 0
+    a = model(camera, NOISY)
+    for i in range(9):
+        a.apply(base, i, changed=i == 0)
+    # frame 9 was lost (its render changed); frame 10 reuses that render: changed=False
+    out = a.apply(moved, 10, changed=False)
+    assert np.array_equal(out, model(camera, NOISY).apply(moved, 10))
+    # from frame to frame the claim is trusted: once every phase caught up, a (lying) claim that
+    # base is unchanged is not checked and the image stays moved's
+    for i in range(11, 18):
+        a.apply(moved, i, changed=False)
+    assert np.array_equal(a.apply(base, 18, changed=False), model(camera, NOISY).apply(moved, 18))
+
+
+def test_changed_blocks_and_their_rectangles() -> None:
+    rng = np.random.default_rng(6)
+    for width in (W, 100, 37):  # whole 64-bit words per chunk, and the byte-wise fallback
+        before = rng.integers(0, 256, (50, width, 3), dtype=np.uint8)
+        for _ in range(20):
+            after = before.copy()
+            r, c = int(rng.integers(0, 50)), int(rng.integers(0, width))
+            after[r, c, int(rng.integers(0, 3))] ^= 1
+            expected = np.zeros((50, -(-width // CHUNK_PX)), bool)
+            expected[r, c // CHUNK_PX] = True
+            assert np.array_equal(changed_blocks(before, after, CHUNK_PX), expected)
+    dirty = np.zeros((H, W // CHUNK_PX), bool)
+    dirty[10:20, 3] = dirty[25, 5] = True  # 5 rows apart: one rectangle
+    dirty[300:302, 14] = True  # far below: another, clipped to the image's width
+    assert dirty_rects(dirty, CHUNK_PX, W) == [(10, 26, 192, 384), (300, 302, 896, 960)]
+    assert dirty_rects(np.zeros_like(dirty), CHUNK_PX, W) == []
+
+
+def test_auto_exposure_meters_an_unchanged_render_once() -> None:
+    cfg = PhotometricConfig(enabled=True, auto_exposure=True)
+    bright, dark = flat(200), flat(60)
+    trusting, metering = AutoExposure(cfg), AutoExposure(cfg)
+    for ae in (trusting, metering):
+        ae.settings(bright, 1.0, frame_index=0)
+    # frame 1 claims to be the unchanged render: no correction (the level is frame 0's)
+    assert trusting.settings(dark, 1.0, frame_index=1, changed=False) == (1.0, 1.0)
+    assert metering.settings(dark, 1.0, frame_index=1, changed=True)[0] > 1.0
+    # after a skipped frame the claim is not trusted: the dark image is metered and corrected
+    assert trusting.settings(dark, 1.0, frame_index=3, changed=False)[0] > 1.0
 
 
 def test_fresh_noise_per_frame_is_a_function_of_seed_and_frame_index(camera) -> None:

@@ -100,6 +100,7 @@ class CameraRecorder:
         self._topics: dict[str, dict[str, schema.Topic]] = {}
         self._info: dict[str, bytes] = {}
         self._version: dict[str, int] = {}
+        self._last_index: dict[str, int] = {}  # the frame index each camera recorded last
         self._cache: dict[tuple[str, str, int], tuple[int, Any, Any]] = {}
         self._encoders: dict[tuple[str, str, int], Callable[[Any], tuple[Any, ...]] | None] = {}
         self.encoded = 0
@@ -159,15 +160,20 @@ class CameraRecorder:
         ``stamp_ns``: the simulated time the camera writes in the headers (its own clock, default
         ``t``); ``phase``: the sensor noise field the colour image carries (``sim/sensors.py``):
         each phase has its own colour encoder, so an unchanged scene re-encodes only the rows that
-        changed since that phase's last frame."""
+        changed since that phase's last frame. ``images.changed`` is against the camera's previous
+        frame: after a skipped ``frame_index`` (a lost frame) the images count as changed."""
         cid, frame = camera.camera_id, camera.frame_id
         topics = self.topics(cid)
         stamp = self.writer.stamp_ns(t if stamp_ns is None else stamp_ns)  # header: bag time (timebase.py)
         if cid not in self._info:
             self._info[cid] = self.writer.serialize(topics["camera_info"], M.camera_info(0, camera))
         self.writer.write_serialized(topics["camera_info"], t, M.restamp(self._info[cid], stamp))
-        version = self._version.get(cid, -1) + int(images.changed or cid not in self._version)
+        # a new image version when the render changed, or may have: a frame index skipped (a lost
+        # frame, sensors.timing) hides a change the render reported only for the lost frame
+        fresh = images.changed or cid not in self._version or self._last_index.get(cid) != frame_index - 1
+        version = self._version.get(cid, -1) + int(fresh)
         self._version[cid] = version
+        self._last_index[cid] = frame_index
         arrays: dict[str, np.ndarray | None] = {"rgb": images.rgb}
         if "depth" in topics and frame_index % self.depth_every == 0:
             arrays["depth"] = images.depth_m
