@@ -47,6 +47,11 @@ from simlan_data.imaging.jpeg_regions import decode_gray_regions
 
 Roi = tuple[int, int, int, int]
 CORNER_METHODS = ("pattern", "contour")
+# Search regions are planned from the tracks predicted at an image's stamp; images stamped within
+# this of the instant last predicted share that prediction (cameras with their own clocks and
+# delays: 11 EKF extrapolations a tick otherwise, for regions that move by well under a pixel:
+# 10 ms at 2 m/s is 2 cm, under a pixel at 8 m; the regions' margins are roi_margin_px + 3 sigma)
+PLAN_SHARE_NS = 10_000_000
 
 
 def _decode_gray(data: NDArray[np.uint8] | None) -> NDArray[np.uint8]:
@@ -334,8 +339,10 @@ class Localizer:
 
     def _tick_predictions(self, t_ns: int) -> _TickPredictions:
         """Every tracked agent's predicted marker at ``t_ns`` (memoized for the cameras of one
-        tick, cleared whenever the filter changes)."""
+        tick, also those stamped within ``PLAN_SHARE_NS``; cleared whenever the filter changes)."""
         hit = self._tick_cache.get(t_ns)
+        if hit is None:  # the last instant predicted, if this image is within PLAN_SHARE_NS of it
+            hit = next((v for k, v in self._tick_cache.items() if abs(k - t_ns) <= PLAN_SHARE_NS), None)
         if hit is None:
             tracks, corners = [], []
             for tr in self._tracks.values():
