@@ -179,9 +179,12 @@ class Simulation:
                     writer.set_metadata(f"simlan.{key}", value)
                 # set up before the clock starts, like the scene (lookup tables take a second or two)
                 self.birdseye = BirdseyeRecorder.create(writer, cfg, scene.cameras)
+                # and the camera stage (its noise bank: a few tenths of a second with sensors on)
+                true_cameras = [r.camera for r in scene.renderers]  # (drifted once, by the scene)
+                sensors = camera_sensors(cfg.sensors, cfg.seed, scene.cameras, true_cameras)
                 wall0, cpu0, main0 = time.perf_counter(), time.process_time(), time.thread_time()
                 try:
-                    self._loop(scene, writer, stats, progress, stop)
+                    self._loop(scene, writer, stats, sensors, progress, stop)
                 except PluginError as err:  # the recording up to the failure is finished and kept
                     failed = err
                 stats.wall_s = time.perf_counter() - wall0
@@ -297,11 +300,12 @@ class Simulation:
         scene: Scene,
         writer: RecordingWriter,
         stats: RunStats,
+        sensors: list[CameraSensor],
         progress: Callable[[float], None] | None,
         stop: Callable[[], bool] | None,
     ) -> None:
         """Step the scene ``steps`` times, running each tick whose rate divides the step."""
-        run = self._start(scene, writer, stats)
+        run = self._start(scene, writer, stats, sensors)
         dt_control = self.control_every / self.physics_hz
         last = self.steps
         for step in range(self.steps + 1):
@@ -331,7 +335,9 @@ class Simulation:
         stats.navigation = {ns: nav.status for ns, nav in run.stack.navigators.items()}
         self.stack = run.stack
 
-    def _start(self, scene: Scene, writer: RecordingWriter, stats: RunStats) -> _Run:
+    def _start(
+        self, scene: Scene, writer: RecordingWriter, stats: RunStats, sensors: list[CameraSensor]
+    ) -> _Run:
         """Publish the static messages and set up the stack, the recorders and the counters."""
         cfg = self.cfg
         pub = Publisher(writer, cfg, scene.agents)
@@ -354,8 +360,6 @@ class Simulation:
         in_contact = {a.namespace: False for a in scene.agents}
         last_xy = {a.namespace: a.pose().translation[:2].copy() for a in scene.agents}
         driver = make_driver(cfg, scene.agents, writer, self.inputs.posemap)  # motion files or the drive
-        true_cameras = [r.camera for r in scene.renderers]  # (drifted once, where the scene built them)
-        sensors = camera_sensors(cfg.sensors, cfg.seed, scene.cameras, true_cameras)
         run = _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
         if cfg.sensors.lagged:  # frames show the scene before their tick: keep the agents' past
             t = cfg.sensors.timing
