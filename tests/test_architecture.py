@@ -37,6 +37,7 @@ TOP_LEVEL_MODULES = {
     "evals",
     "recover",
     "view",
+    "export",
 }
 
 

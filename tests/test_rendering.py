@@ -251,3 +251,31 @@ def test_static_layer_follows_a_pushed_object_and_the_meshes_go_away_again() -> 
         assert not scene.meshes.present
     finally:
         scene.close()
+
+
+def test_instance_stream_gives_the_same_labels_and_ids_from_one_segmentation_pass() -> None:
+    """With ``instance`` the renderer keeps body ids in its layers and looks up both class labels
+    and instance ids: the labels equal a semantic-only renderer's, the ids cover the agent's pixels
+    exactly, and an unchanged frame hands out the same instance image again."""
+    client, cam, labels, _ = _scene("egl")
+    try:
+        ids = LabelTable(np.uint16)
+        plain = CameraRenderer(client, cam, labels, streams=["rgb", "semantic"])
+        both = CameraRenderer(client, cam, labels, streams=["rgb", "semantic", "instance"], instances=ids)
+        for r in (plain, both):
+            r.render_static()
+        centre, _ = cam.intersect_plane_z([[480.0, 270.0]], 0.0)
+        pose = [float(centre[0, 0]), float(centre[0, 1]), 0.3]
+        agent = spawn_agent(client.id, "robot_agent_1", AGENT_TYPES["jackal"], pose=pose, marker_id=1)
+        labels.set(agent.body, agent.label)
+        ids.set(agent.body, 7)
+        boxes = [MovedAgents([agent]).boxes() for _ in range(2)]
+        a, b = plain.render(boxes[0]), both.render(boxes[1])
+        assert a.instances is None and b.instances is not None and b.instances.dtype == np.uint16
+        assert np.array_equal(a.labels, b.labels)
+        assert np.array_equal(b.instances == 7, b.labels == agent.label)
+        assert (b.instances == 7).sum() > 500 and set(np.unique(b.instances)) == {0, 7}
+        again = both.render([])
+        assert not again.changed and again.instances is b.instances
+    finally:
+        client.disconnect()

@@ -1,4 +1,4 @@
-"""The entry points: run, replay, evals, view (Rerun), recover; shared command-line handling."""
+"""The entry points: run, replay, evals, view (Rerun), recover, export; shared command-line handling."""
 
 from __future__ import annotations
 

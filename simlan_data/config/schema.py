@@ -30,7 +30,9 @@ from simlan_data.errors import ConfigError
 from simlan_data.recording.timebase import DEFAULT_EPOCH, parse_epoch
 from simlan_data.world.physics import PhysicsParams
 
-STREAMS = ("rgb", "depth", "semantic")
+STREAMS = ("rgb", "depth", "semantic")  # the default set
+# instance: instance ids, 2D and 3D boxes per frame (issue 25; off by default: a dataset asks for it)
+STREAM_CHOICES = (*STREAMS, "instance")
 RGB_ENCODINGS = ("jpeg", "png", "raw")
 DEPTH_ENCODINGS = ("16UC1", "png", "raw")  # 16UC1 Image mm | compressedDepth PNG mm | 32FC1 Image m
 SEMANTIC_ENCODINGS = ("png", "raw")
@@ -158,7 +160,7 @@ class CameraSetConfig:
                 "use e.g. 960x540",
             )
         for s in self.streams:
-            _choice("cameras.streams[]", s, STREAMS)
+            _choice("cameras.streams[]", s, STREAM_CHOICES)
         if "rgb" not in self.streams:
             raise _bad(
                 "cameras.streams",

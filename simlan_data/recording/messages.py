@@ -53,6 +53,9 @@ MeshFile = T["visualization_msgs/msg/MeshFile"]
 SafetyEventMsg = T[schema.SAFETY_EVENT_TYPE]
 SafetyStateMsg = T[schema.SAFETY_STATE_TYPE]
 CameraEffectsMsg = T[schema.CAMERA_EFFECTS_TYPE]
+InstanceTableMsg = T[schema.INSTANCE_TABLE_TYPE]
+InstanceBoxes2DMsg = T[schema.INSTANCE_BOXES_2D_TYPE]
+InstanceBoxes3DMsg = T[schema.INSTANCE_BOXES_3D_TYPE]
 MARKER_ADD, MARKER_LINE_STRIP, MARKER_TEXT = 0, 4, 9  # visualization_msgs/Marker constants
 
 
@@ -517,3 +520,42 @@ def zone_markers(stamp_ns: int, zones: Sequence[tuple[str, Sequence[Sequence[flo
             )
         )
     return MarkerArray(markers=markers)
+
+
+def instance_table(rows: Sequence[Any]) -> Any:
+    """The instance table from rows with ``id``, ``namespace``, ``name``, ``class_id``."""
+    return InstanceTableMsg(
+        ids=np.array([r.id for r in rows], dtype=np.uint16),
+        namespaces=[r.namespace for r in rows],
+        names=[r.name for r in rows],
+        class_ids=np.array([r.class_id for r in rows], dtype=np.uint8),
+    )
+
+
+def instance_boxes_2d(stamp_ns: int, camera: CameraModel, boxes: Any) -> Any:
+    """One camera frame's 2D boxes from arrays ``ids``, ``pixels``, ``visible`` (N, 4),
+    ``amodal`` (N, 4), ``visible_fraction``, ``truncation``."""
+    return InstanceBoxes2DMsg(
+        header=header(stamp_ns, camera.frame_id),
+        width=camera.width,
+        height=camera.height,
+        ids=np.asarray(boxes.ids, dtype=np.uint16),
+        pixels=np.asarray(boxes.pixels, dtype=np.uint32),
+        visible=np.asarray(boxes.visible, dtype=np.int32).reshape(-1),
+        amodal=np.asarray(boxes.amodal, dtype=np.float32).reshape(-1),
+        visible_fraction=np.asarray(boxes.visible_fraction, dtype=np.float32),
+        truncation=np.asarray(boxes.truncation, dtype=np.float32),
+    )
+
+
+def instance_boxes_3d(
+    stamp_ns: int, ids: Sequence[int], centers: np.ndarray, sizes: np.ndarray, yaw_rad: np.ndarray
+) -> Any:
+    """3D boxes in map: centres (N, 3), sizes (N, 3), yaws (N,)."""
+    return InstanceBoxes3DMsg(
+        header=header(stamp_ns, schema.MAP_FRAME),
+        ids=np.asarray(ids, dtype=np.uint16),
+        centers=np.asarray(centers, dtype=np.float64).reshape(-1),
+        sizes=np.asarray(sizes, dtype=np.float64).reshape(-1),
+        yaw_rad=np.asarray(yaw_rad, dtype=np.float64),
+    )

@@ -64,7 +64,10 @@ def _types_by_suffix() -> tuple[dict[str, tuple[str, ...]], dict[str, tuple[str,
     for every encoding a camera's streams can have."""
     cameras: dict[str, set[str]] = {}
     for rgb, other in (("raw", "raw"), ("jpeg", "png")):
-        for t in schema.camera_topics("X", rgb=rgb, depth=other, semantic=other).values():
+        for t in [
+            *schema.camera_topics("X", rgb=rgb, depth=other, semantic=other).values(),
+            *schema.instance_topics("X").values(),
+        ]:
             cameras.setdefault(t.name.removeprefix("/camera_X"), set()).add(t.msgtype)
     agents = {t.name.removeprefix("/NS"): {t.msgtype} for t in schema.agent_topics("NS").values()}
     return (

@@ -69,5 +69,9 @@ def rows(encodings: dict[str, tuple[str, ...]]) -> list[TopicRow]:
     """Every row: global topics, a camera's, an agent's."""
     out = [TopicRow(t.name, t.msgtype, t.description, "") for t in schema.GLOBAL_TOPICS]
     out += camera_rows(encodings)
+    out += [
+        TopicRow(t.name, t.msgtype, t.description, "`cameras.streams` with `instance`")
+        for t in schema.instance_topics(CAMERA_ID).values()
+    ]
     out += [TopicRow(t.name, t.msgtype, t.description, "") for t in schema.agent_topics(NAMESPACE).values()]
     return out

@@ -52,6 +52,11 @@ MARKER_ARRAY_TYPE = "visualization_msgs/msg/MarkerArray"
 SAFETY_EVENT_TYPE = "simlan_msgs/msg/SafetyEvent"
 SAFETY_STATE_TYPE = "simlan_msgs/msg/SafetyState"
 CAMERA_EFFECTS_TYPE = "simlan_msgs/msg/CameraEffects"
+# rosbags' typestores carry no vision_msgs, and its Detection2D has no visible / amodal pair,
+# visible fraction or truncation: the instance ground truth has its own types
+INSTANCE_TABLE_TYPE = "simlan_msgs/msg/InstanceTable"
+INSTANCE_BOXES_2D_TYPE = "simlan_msgs/msg/InstanceBoxes2D"
+INSTANCE_BOXES_3D_TYPE = "simlan_msgs/msg/InstanceBoxes3D"
 
 # ------------------------------------------------------------------------------------- topics
 CLOCK = "/clock"
@@ -66,6 +71,9 @@ BIRDSEYE_IMAGE = "/birdseye/image"
 SAFETY_EVENTS = "/safety/events"
 SAFETY_ZONES = "/safety/zones"
 PEOPLE_DETECTIONS = "/people/detections"
+INSTANCES = "/ground_truth/instances"
+INSTANCE_BOXES_3D = "/ground_truth/boxes"
+INSTANCE_PNG_FORMAT = "mono16; png compressed mono16"  # instance ids, 16-bit PNG (image_transport's form)
 
 
 @dataclass(frozen=True)
@@ -113,7 +121,8 @@ def camera_topics(
 ) -> dict[str, Topic]:
     """Topics of one camera for the given encodings (``raw`` or a compressed format).
 
-    Keys: ``rgb``, ``camera_info``, and ``depth`` / ``semantic`` when those streams are on.
+    Keys: ``rgb``, ``camera_info``, and ``depth`` / ``semantic`` when those streams are on (the
+    ``instance`` stream's topics: :func:`instance_topics`).
     """
     base = f"/camera_{camera_id}"
     out = {
@@ -175,6 +184,23 @@ def camera_topics(
             )
         )
     return out
+
+
+def instance_topics(camera_id: str | int) -> dict[str, Topic]:
+    """Topics of one camera's ``instance`` stream (issue 25): keys ``instance`` and ``boxes_2d``."""
+    base = f"/camera_{camera_id}"
+    return {
+        "instance": Topic(
+            f"{base}/instances/image_raw/compressed",
+            COMPRESSED_IMAGE_TYPE,
+            "instance ids (track ids), 16-bit PNG (mono16), 0 = no instance (see /ground_truth/instances), with every colour image",
+        ),
+        "boxes_2d": Topic(
+            f"{base}/instances/boxes",
+            INSTANCE_BOXES_2D_TYPE,
+            "per instance in the image: visible box (mask), amodal box (3D box projected), visible fraction, truncation",
+        ),
+    }
 
 
 def agent_topics(namespace: str) -> dict[str, Topic]:
@@ -272,6 +298,16 @@ GLOBAL_TOPICS: tuple[Topic, ...] = (
         POSE_ARRAY_TYPE,
         "people found in the cameras' segmentation images, fused, frame map, image stamp (camera rate, runs with people)",
     ),
+    Topic(
+        INSTANCES,
+        INSTANCE_TABLE_TYPE,
+        "instance id -> namespace, object name, semantic class (once, stream instance)",
+    ),
+    Topic(
+        INSTANCE_BOXES_3D,
+        INSTANCE_BOXES_3D_TYPE,
+        "3D box of every instance in map: centre, size, yaw (camera rate, stream instance)",
+    ),
 )
 
 REQUIRED_TOPICS = (CLOCK, TF_STATIC, GROUND_TRUTH_POSES, CONFIG, RUN_INFO)
@@ -279,7 +315,9 @@ REQUIRED_TOPICS = (CLOCK, TF_STATIC, GROUND_TRUTH_POSES, CONFIG, RUN_INFO)
 # Published once at the start and meant for every subscriber, also one that comes later: recorded
 # with the QoS a ROS 2 latched publisher offers (transient local, reliable, keep last 1, as
 # tf2's StaticTransformBroadcaster), so that `ros2 bag play` replays them to late subscribers too.
-LATCHED_TOPICS = frozenset({TF_STATIC, CONFIG, RUN_INFO, SEMANTIC_LABELS, SAFETY_ZONES, RANDOMIZATION})
+LATCHED_TOPICS = frozenset(
+    {TF_STATIC, CONFIG, RUN_INFO, SEMANTIC_LABELS, SAFETY_ZONES, RANDOMIZATION, INSTANCES}
+)
 ROS_DISTRO = "jazzy"  # the message definitions the bag embeds are Jazzy's (metadata.yaml ros_distro)
 
 

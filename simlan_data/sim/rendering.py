@@ -1,4 +1,4 @@
-"""Camera rendering: RGB, metric depth and semantic labels, with lens distortion, layered.
+"""Camera rendering: RGB, metric depth, semantic labels and instance ids, with lens distortion, layered.
 
 Data flow per camera frame::
 
@@ -21,12 +21,17 @@ the simulation removes them once the static layers exist (``sim/dynamic_layer.py
 renders draw only what moves. Cameras that see no moved body reuse their previous output.
 ``layered=False`` renders the whole canvas every frame (the baseline the layered path is measured
 and tested against).
+
+With the ``instance`` stream the label layer holds PyBullet's body id + 1 (uint16) instead of the
+class id: compositing and distortion (nearest neighbour) treat it alike, and the output's class
+labels and instance ids are two lookups of it (``LabelTable``s), from the one segmentation pass.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -41,7 +46,7 @@ CANVAS_MARGIN_PX = 3
 # measured (benchmarks/perf.py): a region render's fixed cost equals about this many pixels of
 # region; closer regions are cheaper rendered as one
 RENDER_CALL_COST_PX = 40_000
-STREAMS = ("rgb", "depth", "semantic")
+STREAMS = ("rgb", "depth", "semantic")  # (the default; "instance" is asked for by name)
 
 Rect = tuple[int, int, int, int]  # u0, v0, u1, v1 (exclusive), in canvas pixels
 # corner index = 4 * ix + 2 * iy + iz over (lo, hi) per axis; edges join corners differing in one bit
@@ -59,17 +64,19 @@ class CameraImages:
     depth_m: NDArray[np.float32] | None
     labels: NDArray[np.uint8] | None
     changed: bool = True
+    instances: NDArray[np.uint16] | None = None  # instance (track) ids, 0 = none (stream "instance")
 
 
 class LabelTable:
-    """Body id -> semantic class id lookup, growing as bodies are added."""
+    """Body id -> semantic class id (or instance id: ``dtype=np.uint16``) lookup, growing as bodies
+    are added."""
 
-    def __init__(self) -> None:
-        self._lut = np.zeros(1, dtype=np.uint8)  # index = body id + 1 (PyBullet's background is -1)
+    def __init__(self, dtype: type[np.unsignedinteger] = np.uint8) -> None:
+        self._lut = np.zeros(1, dtype=dtype)  # index = body id + 1 (PyBullet's background is -1)
 
     def set(self, body: int, label: int) -> None:
         if body + 1 >= len(self._lut):
-            grown = np.zeros(max(body + 2, 2 * len(self._lut)), dtype=np.uint8)
+            grown = np.zeros(max(body + 2, 2 * len(self._lut)), dtype=self._lut.dtype)
             grown[: len(self._lut)] = self._lut
             self._lut = grown
         self._lut[body + 1] = label
@@ -77,6 +84,10 @@ class LabelTable:
     def apply(self, seg: NDArray[np.int32]) -> NDArray[np.uint8]:
         idx = np.clip(seg + 1, 0, len(self._lut) - 1)
         return self._lut[idx]
+
+    def apply_index(self, index: NDArray[Any]) -> NDArray[Any]:
+        """Look up an image of body id + 1 (0 = background), as the instance mode's layers hold."""
+        return np.take(self._lut, index, mode="clip")  # (clip: 1.5x faster than np.minimum + index)
 
 
 def merge_rects(rects: list[Rect], *, slack_px: int = 0) -> list[Rect]:
@@ -114,6 +125,8 @@ class CameraRenderer:
     ``streams`` says which outputs are needed: without ``semantic`` no segmentation pass runs
     (PyBullet's EGL renderer draws the scene twice for it) and ``labels`` is None; without
     ``depth`` the output ``depth_m`` is None (depth is still rendered: layers composite by it).
+    With ``instance`` (and an ``instances`` table: body id -> instance id) the output carries
+    ``instances`` as well, from the same segmentation pass.
     """
 
     def __init__(
@@ -127,10 +140,14 @@ class CameraRenderer:
         far_m: float = 100.0,
         layered: bool = True,
         streams: Sequence[str] = STREAMS,
+        instances: LabelTable | None = None,
     ) -> None:
         self.client, self.camera, self.labels = client, camera, labels
         self.distort, self.near_m, self.far_m, self.layered = distort, near_m, far_m, layered
-        self.want_depth, self.want_labels = "depth" in streams, "semantic" in streams
+        self.instances = instances if "instance" in streams else None
+        self.want_depth = "depth" in streams
+        self.want_labels = "semantic" in streams or self.instances is not None
+        self._public: CameraImages | None = None  # instance mode: the last output, looked up
         self._view = camera.opengl_view()
         self._setup_canvas()
         self._static: Layers | None = None
@@ -218,7 +235,10 @@ class CameraRenderer:
         u0, v0, u1, v1 = rect
         rgb = np.empty((v1 - v0, u1 - u0, 3), dtype=np.uint8)
         depth = np.empty((v1 - v0, u1 - u0), dtype=np.float32)
-        out_labels = np.empty((v1 - v0, u1 - u0), dtype=np.uint8) if want_labels else None
+        by_body = self.instances is not None
+        out_labels = (
+            np.empty((v1 - v0, u1 - u0), dtype=np.uint16 if by_body else np.uint8) if want_labels else None
+        )
         tw, th = EGL_MAX_TILE if client.backend == "egl" else (u1 - u0, v1 - v0)
         # TinyRenderer samples pixel centres half a pixel off OpenGL's convention (measured:
         # +0.5 px in u, -0.5 px in v); shifting the principal point puts them back
@@ -249,7 +269,8 @@ class CameraRenderer:
                 rgb[sl] = np.asarray(c).reshape(h, w, 4)[..., :3]
                 depth[sl] = linearize_depth(np.asarray(d).reshape(h, w), near_m=self.near_m, far_m=self.far_m)
                 if out_labels is not None:
-                    out_labels[sl] = self.labels.apply(np.asarray(s).reshape(h, w).astype(np.int32))
+                    seg = np.asarray(s).reshape(h, w).astype(np.int32)
+                    out_labels[sl] = np.clip(seg + 1, 0, 65535) if by_body else self.labels.apply(seg)
                 self.regions_rendered += 1
                 self.pixels_rendered += w * h
         return rgb, depth, out_labels
@@ -374,13 +395,29 @@ class CameraRenderer:
         ``sim/dynamic_layer.py`` keeps that account). Without any, the last images are reused.
         """
         if not self.layered:
-            return self._finish(self._full_canvas())
+            return self._lookup(self._finish(self._full_canvas()))
         if self._static is None or self._canvas is None:
             raise RuntimeError("render_static() must run before render() in layered mode")
         rects = self.canvas_rects(moved_aabbs)
         if not rects and self._last is not None:
+            if self._public is not None:
+                return replace(self._public, changed=False)
             last = self._last
             return CameraImages(last.rgb, last.depth_m, last.labels, changed=False)
         for rect in rects:
             self._composite(rect)
-        return self._finish(self._canvas, rects if self._last is not None else None)
+        return self._lookup(self._finish(self._canvas, rects if self._last is not None else None))
+
+    def _lookup(self, out: CameraImages) -> CameraImages:
+        """Instance mode: the class labels and instance ids of the body-id image (else ``out``)."""
+        if self.instances is None or out.labels is None:
+            return out
+        body = out.labels
+        self._public = CameraImages(
+            out.rgb,
+            out.depth_m,
+            self.labels.apply_index(body).astype(np.uint8, copy=False),
+            changed=out.changed,
+            instances=self.instances.apply_index(body).astype(np.uint16, copy=False),
+        )
+        return self._public

@@ -25,6 +25,7 @@ from simlan_data.geometry.calibration import Calibration, available_camera_ids, 
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.sim.agents import Agent, spawn_agent
 from simlan_data.sim.dynamic_layer import MovedAgents, StaticMeshes
+from simlan_data.sim.instances import INSTANCE_STREAM, InstanceObject, instance_objects
 from simlan_data.sim.posemap_drive import DriveInputs, load_drive_inputs
 from simlan_data.sim.pybullet_client import Client, connect
 from simlan_data.sim.randomize import LitRenderer, Randomizer, keep_clear
@@ -180,6 +181,7 @@ class Scene:
     meshes: StaticMeshes | None = None  # layered: the warehouse meshes, removed between static layers
     moved: MovedAgents | None = None
     randomizer: Randomizer | None = None  # domain randomization (sim/randomize.py): post_render per image
+    instances: list[InstanceObject] = field(default_factory=list)  # stream instance: the instance table
     _baked: dict[int, tuple] = field(default_factory=dict)
 
     @staticmethod
@@ -221,6 +223,7 @@ class Scene:
         cam_cfg = cfg.cameras
         # (light and sun from randomize: applied to each rendered colour image)
         make = functools.partial(LitRenderer, randomizer=randomizer) if randomizer.lights else CameraRenderer
+        instance_ids = LabelTable(np.uint16)  # body id -> instance id, filled once the agents exist
         renderers = [
             make(
                 client,
@@ -231,6 +234,7 @@ class Scene:
                 far_m=cam_cfg.far_m,
                 layered=cfg.render.layered,
                 streams=cam_cfg.streams,
+                instances=instance_ids,
             )
             for cam in inputs.cameras
         ]
@@ -249,6 +253,10 @@ class Scene:
         names = dict(world.names)
         names.update({a.body: a.namespace for a in agents})
         scene = Scene(client, world, inputs.cameras, renderers, agents, labels, names, randomizer=randomizer)
+        if INSTANCE_STREAM in cam_cfg.streams:
+            scene.instances = instance_objects(agents, world)
+            for obj in scene.instances:
+                instance_ids.set(obj.body, obj.id)
         if cfg.render.layered:  # region renders draw only what moves (see sim/dynamic_layer.py)
             scene.meshes = StaticMeshes(client.id, world, labels)
             scene.meshes.remove()

@@ -173,5 +173,6 @@ def expose(
             continue
         w = row_weights(back, cam.height, e, cfg.line_time_s)
         rgb = combine([s[i].rgb for s in subs], w)  # type: ignore[misc]
-        out.append(CameraImages(rgb, last.depth_m, last.labels, changed=any(s[i].changed for s in subs)))
+        changed = any(s[i].changed for s in subs)
+        out.append(CameraImages(rgb, last.depth_m, last.labels, changed=changed, instances=last.instances))
     return out, k

@@ -48,6 +48,7 @@ from simlan_data.sim.birdseye_live import BirdseyeRecorder
 from simlan_data.sim.camera_recording import CameraRecorder
 from simlan_data.sim.dynamic_layer import MovedAgents
 from simlan_data.sim.exposures import Exposed, ExposureSchedule
+from simlan_data.sim.instances import INSTANCE_STREAM, InstanceRecorder
 from simlan_data.sim.posemap_drive import PoseDriver, make_driver
 from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
@@ -367,6 +368,8 @@ class Simulation:
             run.schedule = ExposureSchedule(sensors, self.camera_every, self.physics_hz, worst)
             if scene.moved is not None:
                 run.drawn = [MovedAgents(scene.agents) for _ in scene.renderers]
+        if INSTANCE_STREAM in cfg.cameras.streams:
+            run.instances = InstanceRecorder(writer, scene.client.id, scene.instances)
         return run
 
     def _camera_tick(self, run: _Run, step: int, t: int) -> None:
@@ -401,6 +404,8 @@ class Simulation:
             )
             counts, lags = [subframes] * len(rendered), [0] * len(rendered)
         stats.camera_subframes += subframes
+        if run.instances is not None:  # 3D boxes as the scene stands at the tick
+            run.instances.tick(t)
         frames = []
         index = step // self.camera_every
         for images, camera, sensor, k, lag in zip(
@@ -417,6 +422,8 @@ class Simulation:
             encoded = run.recorder.record(
                 t, index, camera, shot.images, stamp_ns=shot.stamp_ns, phase=shot.noise_phase
             )
+            if run.instances is not None:
+                run.instances.record(t, camera, shot.images, stamp_ns=shot.stamp_ns)
             plan = stack.search_plan(shot.stamp_ns, camera.camera_id)
             search = (
                 None if plan is None else self._search(stack, run.writer, camera, plan, shot.images, encoded)
@@ -543,3 +550,4 @@ class _Run:
     delivered: dict[str, CameraImages]  # per camera, the last frame that was not lost
     schedule: ExposureSchedule | None = None  # late cameras: when each exposes (sensors.timing)
     drawn: list[MovedAgents] = field(default_factory=list)  # per camera: what it last drew (late cameras)
+    instances: InstanceRecorder | None = None  # stream instance: instance images, 2D and 3D boxes

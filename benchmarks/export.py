@@ -1,0 +1,141 @@
+"""Instance ground truth and dataset export (issue 25): what annotation costs a run, how fast the
+exports go, and how many bytes an annotated frame takes.
+
+    python benchmarks/export.py --json benchmarks/results/export_DATE.json [--cameras 11] [--duration 10] [--repeat 2]
+
+The same run (default scenario, seed 1, the first ``--cameras`` GPSS cameras at 960x540 and 5 Hz)
+with ``cameras.streams=[rgb,semantic]`` and ``[rgb,semantic,instance]``, alternately (``--repeat``
+pairs: load drifts, so each pair runs close in time); frames per second = camera frames recorded
+/ the run's simulation wall time (``sim.wall_s``: start-up left out). Then the instance run is
+exported to COCO and YOLO (``python -m simlan_data.export``, process wall time). History:
+docs/benchmarks/datasets.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from common import machine, run_cli
+
+OFF, ON = "[rgb,semantic]", "[rgb,semantic,instance]"
+INSTANCE_SUFFIXES = ("/instances/image_raw/compressed", "/instances/boxes")
+INSTANCE_GLOBALS = ("/ground_truth/instances", "/ground_truth/boxes")
+
+
+def run(root: Path, name: str, streams: str, cameras: int, duration_s: float) -> dict[str, float]:
+    out = root / name
+    proc = run_cli(
+        f"duration_s={duration_s:g}",
+        "progress=false",
+        "seed=1",
+        f"cameras.count={cameras}",
+        f"cameras.streams={streams}",
+        f"hydra.run.dir={out}",
+    )
+    if proc.returncode != 0:
+        raise SystemExit(f"run {name} failed: {proc.stderr.strip().splitlines()[-1:]}")
+    metrics = json.loads((out / "metrics.json").read_text())
+    return {"frames": metrics["sim.camera_frames"], "wall_s": metrics["sim.wall_s"], "dir": str(out)}
+
+
+def instance_bytes(recording: Path) -> tuple[int, int]:
+    """(bytes of the instance topics' messages, annotated frames) of a recording."""
+    from simlan_data.recording.reader import RecordingReader
+
+    total = frames = 0
+    with RecordingReader(recording) as reader:
+        topics = [t for t in reader.topics if t.endswith(INSTANCE_SUFFIXES) or t in INSTANCE_GLOBALS]
+        for m in reader.messages(topics, raw=True):
+            total += len(m.msg)
+            frames += int(m.topic.endswith("/instances/boxes"))
+    return total, frames
+
+
+def export_speed(run_dir: Path, fmt: str, out: Path) -> float:
+    t0 = time.perf_counter()
+    proc = run_cli(str(run_dir), "--format", fmt, "--out", str(out), module="simlan_data.export")
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"export {fmt} failed: {proc.stderr.strip()}")
+    return wall
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--json", type=Path, required=True)
+    parser.add_argument("--cameras", type=int, default=11)
+    parser.add_argument("--duration", type=float, default=10.0)
+    parser.add_argument("--repeat", type=int, default=2)
+    args = parser.parse_args()
+    root = Path(tempfile.mkdtemp(prefix="bench_export_"))
+    try:
+        runs: dict[str, list[dict[str, float]]] = {"off": [], "on": []}
+        for i in range(args.repeat):
+            for key, streams in (("off", OFF), ("on", ON)):
+                runs[key].append(run(root, f"{key}{i}", streams, args.cameras, args.duration))
+        fps = {k: statistics.median(r["frames"] / r["wall_s"] for r in v) for k, v in runs.items()}
+        last_on = Path(str(runs["on"][-1]["dir"]))
+        size, annotated = instance_bytes(last_on / "recording")
+        export = {}
+        for fmt in ("coco", "yolo"):
+            wall = export_speed(last_on, fmt, root / f"export_{fmt}")
+            export[fmt] = {"wall_s": round(wall, 2), "frames_per_s": round(annotated / wall, 1)}
+        cost = 1 - fps["on"] / fps["off"]
+        setup = f"default scenario, {args.cameras} cameras 960x540 at 5 Hz, {args.duration:g} s, rgb+semantic"
+        result = {
+            "command": f"python benchmarks/export.py --cameras {args.cameras} --duration {args.duration:g} --repeat {args.repeat} --json FILE",
+            "machine": machine(),
+            "date": datetime.date.today().isoformat(),
+            "history": "docs/benchmarks/datasets.md",
+            "setup": setup,
+            "runs": runs,
+            "frames_per_s": fps,
+            "instance_bytes": size,
+            "annotated_frames": annotated,
+            "export": export,
+            "figures": [
+                {
+                    "id": "dataset_annotated_fps",
+                    "figure": f"annotated camera frames per second (stream instance on; {setup})",
+                    "value": round(fps["on"], 1),
+                    "unit": "frames/s",
+                    "baseline": f"instance off: {fps['off']:.1f} frames/s ({cost:.0%} slower with it)",
+                    "note": f"median of {args.repeat} alternating pairs; frames / simulation wall time",
+                    "history": "docs/benchmarks/datasets.md",
+                },
+                {
+                    "id": "dataset_export_fps",
+                    "figure": "dataset export speed, COCO (JPEG bytes copied, RLE masks)",
+                    "value": export["coco"]["frames_per_s"],
+                    "unit": "frames/s",
+                    "note": f"YOLO: {export['yolo']['frames_per_s']} frames/s; whole process incl. start-up, {annotated} frames",
+                    "history": "docs/benchmarks/datasets.md",
+                },
+                {
+                    "id": "dataset_bytes_per_frame",
+                    "figure": "recorded instance ground truth per annotated frame (16-bit PNG ids + 2D boxes, with the 3D boxes shared)",
+                    "value": round(size / max(annotated, 1) / 1024, 1),
+                    "unit": "KiB",
+                    "history": "docs/benchmarks/datasets.md",
+                },
+            ],
+        }
+        args.json.write_text(json.dumps(result, indent=1) + "\n")
+        print(
+            json.dumps(
+                {k: result[k] for k in ("frames_per_s", "export", "instance_bytes", "annotated_frames")}
+            )
+        )
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,184 @@
+"""Instance ground truth and dataset export end to end (issue 25): one real 2 s run with three
+cameras and stream instance, its new topics read back with the independent mcap + mcap_ros2
+decoder, exported to COCO (read back with pycocotools) and YOLO through the CLI."""
+
+from __future__ import annotations
+
+import hashlib
+from collections import defaultdict
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from pycocotools.coco import COCO
+
+from conftest import made_once, run_cli
+
+CAMERAS = ("160", "161", "162")  # 160 and 161 overlap where the robot drives
+RUN = (
+    "duration_s=2",
+    "progress=false",
+    f"cameras.ids=[{','.join(CAMERAS)}]",
+    "cameras.streams=[rgb,semantic,instance]",
+    "seed=5",
+)
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    def make(root: Path) -> None:
+        proc = run_cli(*RUN, f"hydra.run.dir={root / 'run'}")
+        assert proc.returncode == 0, proc.stderr
+        for fmt in ("coco", "yolo"):
+            proc = run_cli(
+                str(root / "run"), "--format", fmt, "--out", str(root / fmt), module="simlan_data.export"
+            )
+            assert proc.returncode == 0, proc.stderr
+
+    return made_once(tmp_path_factory, "export_runs", make)
+
+
+@pytest.fixture(scope="module")
+def recorded(made: Path) -> dict:
+    """The new topics, decoded independently: table, 3D boxes, and per (camera, stamp) the
+    instance image and the 2D boxes message."""
+    out: dict = {"masks": {}, "boxes": {}, "boxes3d": []}
+    (bag,) = (made / "run" / "recording").glob("*.mcap")
+    with bag.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _schema, channel, _message, msg in reader.iter_decoded_messages():
+            topic = channel.topic
+            if topic == "/ground_truth/instances":
+                out["table"] = msg
+            elif topic == "/ground_truth/boxes":
+                out["boxes3d"].append(msg)
+            elif topic.endswith("/instances/image_raw/compressed"):
+                assert msg.format == "mono16; png compressed mono16"
+                image = cv2.imdecode(np.frombuffer(bytes(msg.data), np.uint8), cv2.IMREAD_UNCHANGED)
+                assert image is not None and image.dtype == np.uint16
+                out["masks"][(msg.header.frame_id, _stamp(msg))] = image
+            elif topic.endswith("/instances/boxes"):
+                out["boxes"][(msg.header.frame_id, _stamp(msg))] = msg
+    return out
+
+
+def _stamp(msg) -> int:
+    return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+
+def test_recorded_boxes_are_the_masks_bounds(recorded: dict) -> None:
+    table = recorded["table"]
+    assert list(table.ids) == list(range(1, len(table.ids) + 1))
+    assert table.namespaces[0] == "robot_agent_1"
+    assert len(recorded["boxes3d"]) > 0 and len(recorded["boxes3d"][0].ids) == len(table.ids)
+    seen = 0
+    for key, msg in recorded["boxes"].items():
+        mask = recorded["masks"][key]
+        assert (msg.width, msg.height) == (mask.shape[1], mask.shape[0])
+        assert sorted(set(np.unique(mask).tolist()) - {0}) == list(msg.ids)
+        for k, iid in enumerate(msg.ids):
+            vs, us = np.nonzero(mask == iid)
+            assert list(msg.visible[4 * k : 4 * k + 4]) == [us.min(), vs.min(), us.max() + 1, vs.max() + 1]
+            assert msg.pixels[k] == len(us)
+            u0, v0, u1, v1 = msg.amodal[4 * k : 4 * k + 4]  # the 3D box's projection holds the mask
+            assert (
+                u0 - 2 <= us.min()
+                and us.max() + 1 <= u1 + 2
+                and v0 - 2 <= vs.min()
+                and vs.max() + 1 <= v1 + 2
+            )
+            assert 0 < msg.visible_fraction[k] <= 1 and 0 <= msg.truncation[k] < 1
+            seen += 1
+    assert seen >= 10
+
+
+def test_coco_reads_back_with_pycocotools(made: Path, recorded: dict) -> None:
+    coco = COCO(str(made / "coco" / "annotations" / "instances.json"))
+    frames = {
+        (f"camera_{im['camera_id']}_optical_frame", im["stamp_ns"]): im for im in coco.dataset["images"]
+    }
+    assert len(frames) == len(recorded["boxes"]) > 0
+    checked = 0
+    for key, im in frames.items():
+        assert (made / "coco" / im["file_name"]).is_file()
+        mask = recorded["masks"][key]
+        for ann in coco.loadAnns(coco.getAnnIds(imgIds=[im["id"]])):
+            drawn = coco.annToMask(ann)
+            assert np.array_equal(drawn, mask == ann["track_id"])
+            vs, us = np.nonzero(drawn)
+            assert ann["bbox"] == [us.min(), vs.min(), us.max() + 1 - us.min(), vs.max() + 1 - vs.min()]
+            assert ann["area"] == len(us) and ann["iscrowd"] == 0
+            checked += 1
+    assert checked >= 10
+    names = {c["id"]: c["name"] for c in coco.loadCats(coco.getCatIds())}
+    assert "pallet_truck" in names.values()
+
+
+def test_track_ids_name_one_object_in_every_camera(made: Path, recorded: dict) -> None:
+    coco = COCO(str(made / "coco" / "annotations" / "instances.json"))
+    cameras_of: dict[int, set[str]] = defaultdict(set)
+    for ann in coco.dataset["annotations"]:
+        image = coco.imgs[ann["image_id"]]
+        cameras_of[ann["track_id"]].add(image["camera_id"])
+        row = list(recorded["table"].ids).index(ann["track_id"])
+        assert ann["attributes"]["namespace"] == recorded["table"].namespaces[row]
+    # the robot (track 1, robot_agent_1 in the ground truth) is seen by two cameras under one id
+    assert len(cameras_of[1]) >= 2
+
+
+def test_yolo_labels_match_coco(made: Path) -> None:
+    coco = COCO(str(made / "coco" / "annotations" / "instances.json"))
+    names = (made / "yolo" / "data.yaml").read_text()
+    for im in coco.dataset["images"]:
+        stem = Path(im["file_name"]).stem
+        assert (made / "yolo" / "images" / f"{stem}.jpg").read_bytes() == (
+            made / "coco" / im["file_name"]
+        ).read_bytes()
+        rows = [line.split() for line in (made / "yolo" / "labels" / f"{stem}.txt").read_text().splitlines()]
+        anns = coco.loadAnns(coco.getAnnIds(imgIds=[im["id"]]))
+        assert len(rows) == len(anns)
+        for row, ann in zip(rows, anns, strict=True):
+            x, y, w, h = ann["bbox"]
+            expected = [
+                (x + w / 2) / im["width"],
+                (y + h / 2) / im["height"],
+                w / im["width"],
+                h / im["height"],
+            ]
+            assert np.allclose([float(v) for v in row[1:]], expected, atol=1e-6)
+            assert f"{coco.cats[ann['category_id']]['name']}" in names
+
+
+def _digest(root: Path) -> str:
+    h = hashlib.sha256()
+    for path in sorted(p for p in root.rglob("*") if p.is_file()):
+        h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    return h.hexdigest()
+
+
+def test_export_is_deterministic_and_never_overwrites(made: Path, tmp_path: Path) -> None:
+    for fmt in ("coco", "yolo"):
+        proc = run_cli(
+            str(made / "run"), "--format", fmt, "--out", str(tmp_path / fmt), module="simlan_data.export"
+        )
+        assert proc.returncode == 0, proc.stderr
+        assert _digest(tmp_path / fmt) == _digest(made / fmt)
+    before = _digest(tmp_path / "coco")
+    proc = run_cli(
+        str(made / "run"), "--format", "coco", "--out", str(tmp_path / "coco"), module="simlan_data.export"
+    )
+    assert proc.returncode == 2
+    assert (
+        proc.stderr.strip().count("\n") == 0
+        and "--out" in proc.stderr
+        and "choose a new --out" in proc.stderr
+    )
+    assert _digest(tmp_path / "coco") == before
+    proc = run_cli(
+        str(made / "run"), "--format", "voc", "--out", str(tmp_path / "voc"), module="simlan_data.export"
+    )
+    assert proc.returncode == 2 and "--format" in proc.stderr and proc.stderr.strip().count("\n") == 0
+    assert not (tmp_path / "voc").exists()
