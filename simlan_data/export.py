@@ -1,4 +1,4 @@
-"""``python -m simlan_data.export RUN --format coco|yolo --out DIR``: a recording as a dataset.
+"""``python -m simlan_data.export RUN --format coco|yolo|mot|aicity --out DIR``: a recording as a dataset.
 
 The public name of ``python -m simlan_data.export``; the application is :mod:`simlan_data.apps.export`.
 """

@@ -1,6 +1,7 @@
 """Instance ground truth and dataset export end to end (issue 25): one real 2 s run with three
 cameras and stream instance, its new topics read back with the independent mcap + mcap_ros2
-decoder, exported to COCO (read back with pycocotools) and YOLO through the CLI."""
+decoder, exported through the CLI to COCO (read back with pycocotools), YOLO, MOTChallenge (read
+back and scored by TrackEval) and the AI City multi-camera tracking text."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import trackeval
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from pycocotools.coco import COCO
@@ -25,6 +27,7 @@ RUN = (
     "cameras.streams=[rgb,semantic,instance]",
     "seed=5",
 )
+FORMATS = ("coco", "yolo", "mot", "aicity")
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +35,7 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
     def make(root: Path) -> None:
         proc = run_cli(*RUN, f"hydra.run.dir={root / 'run'}")
         assert proc.returncode == 0, proc.stderr
-        for fmt in ("coco", "yolo"):
+        for fmt in FORMATS:
             proc = run_cli(
                 str(root / "run"), "--format", fmt, "--out", str(root / fmt), module="simlan_data.export"
             )
@@ -160,7 +163,7 @@ def _digest(root: Path) -> str:
 
 
 def test_export_is_deterministic_and_never_overwrites(made: Path, tmp_path: Path) -> None:
-    for fmt in ("coco", "yolo"):
+    for fmt in FORMATS:
         proc = run_cli(
             str(made / "run"), "--format", fmt, "--out", str(tmp_path / fmt), module="simlan_data.export"
         )
@@ -177,8 +180,173 @@ def test_export_is_deterministic_and_never_overwrites(made: Path, tmp_path: Path
         and "choose a new --out" in proc.stderr
     )
     assert _digest(tmp_path / "coco") == before
+    for fmt in ("mot", "aicity"):
+        before = _digest(tmp_path / fmt)
+        proc = run_cli(
+            str(made / "run"), "--format", fmt, "--out", str(tmp_path / fmt), module="simlan_data.export"
+        )
+        assert proc.returncode == 2 and "choose a new --out" in proc.stderr
+        assert _digest(tmp_path / fmt) == before
     proc = run_cli(
         str(made / "run"), "--format", "voc", "--out", str(tmp_path / "voc"), module="simlan_data.export"
     )
     assert proc.returncode == 2 and "--format" in proc.stderr and proc.stderr.strip().count("\n") == 0
     assert not (tmp_path / "voc").exists()
+
+
+def _coco_by_frame(made: Path) -> tuple[COCO, dict[tuple[str, int], dict]]:
+    """The COCO export and its images by (camera id, frame index)."""
+    coco = COCO(str(made / "coco" / "annotations" / "instances.json"))
+    return coco, {(im["camera_id"], im["frame_index"]): im for im in coco.dataset["images"]}
+
+
+def _trackeval(gt: Path, trackers: Path) -> dict:
+    """TrackEval's MotChallenge2DBox results of every tracker under ``trackers`` on the export ``gt``."""
+    evaluator = trackeval.Evaluator(
+        {
+            "USE_PARALLEL": False,
+            "PRINT_RESULTS": False,
+            "PRINT_CONFIG": False,
+            "TIME_PROGRESS": False,
+            "OUTPUT_SUMMARY": False,
+            "OUTPUT_DETAILED": False,
+            "PLOT_CURVES": False,
+        }
+    )
+    dataset = trackeval.datasets.MotChallenge2DBox(
+        {
+            "GT_FOLDER": str(gt),
+            "TRACKERS_FOLDER": str(trackers),
+            "BENCHMARK": "SIMLAN",
+            "SPLIT_TO_EVAL": "train",
+            "PRINT_CONFIG": False,
+        }
+    )
+    metrics = [trackeval.metrics.HOTA(), trackeval.metrics.CLEAR(), trackeval.metrics.Identity()]
+    results, messages = evaluator.evaluate([dataset], metrics)
+    assert set(messages["MotChallenge2DBox"].values()) == {"Success"}
+    out = {}
+    for tracker, sequences in results["MotChallenge2DBox"].items():
+        p = sequences["COMBINED_SEQ"]["pedestrian"]
+        out[tracker] = {
+            "HOTA": float(np.mean(p["HOTA"]["HOTA"])),
+            "MOTA": float(p["CLEAR"]["MOTA"]),
+            "IDF1": float(p["Identity"]["IDF1"]),
+            "IDSW": int(p["CLEAR"]["IDSW"]),
+        }
+    return out
+
+
+def test_mot_matches_coco_and_trackeval_scores_it(made: Path, tmp_path: Path) -> None:
+    mot = made / "mot"
+    coco, images = _coco_by_frame(made)
+    assert (mot / "seqmaps" / "SIMLAN-train.txt").read_text() == "name\n" + "".join(
+        f"camera_{c}\n" for c in CAMERAS
+    )
+    rows: dict[str, list[list[str]]] = {}
+    for cid in CAMERAS:
+        seq = mot / "SIMLAN-train" / f"camera_{cid}"
+        info = (seq / "seqinfo.ini").read_text()
+        frames = sorted(i for c, i in images if c == cid)
+        assert f"seqLength={len(frames)}\n" in info and "frameRate=5\n" in info and "imExt=.jpg" in info
+        for index in frames:
+            assert (seq / "img1" / f"{index + 1:06d}.jpg").read_bytes() == (
+                made / "coco" / images[(cid, index)]["file_name"]
+            ).read_bytes()
+        rows[cid] = [line.split(",") for line in (seq / "gt" / "gt.txt").read_text().splitlines()]
+        expected = []
+        for index in frames:
+            for ann in coco.loadAnns(coco.getAnnIds(imgIds=[images[(cid, index)]["id"]])):
+                vis = ann["attributes"]["visible_fraction"]
+                expected.append([index + 1, ann["track_id"], *ann["bbox"], 1, 1, vis])
+        got = [
+            [int(r[0]), int(r[1]), *(int(v) for v in r[2:6]), int(r[6]), int(r[7]), float(r[8])]
+            for r in rows[cid]
+        ]
+        assert len(got) == len(expected)
+        np.testing.assert_allclose(
+            np.array(got, dtype=float).reshape(-1, 9),
+            np.array(expected, dtype=float).reshape(-1, 9),
+            atol=1e-6,
+        )
+    # the ground truth as a tracker's output scores 1 on every metric; one id changed mid-track
+    # (a tracker that loses the robot and picks it up as a new object) scores below 1
+    busiest = max(CAMERAS, key=lambda c: len(rows[c]))
+    assert len(rows[busiest]) >= 6
+    for name in ("self", "swapped"):
+        data = tmp_path / "trackers" / "SIMLAN-train" / name / "data"
+        data.mkdir(parents=True)
+        for cid in CAMERAS:
+            lines = [list(r) for r in rows[cid]]
+            if name == "swapped" and cid == busiest:
+                track = lines[0][1]
+                mine = [r for r in lines if r[1] == track]
+                for r in mine[len(mine) // 2 :]:
+                    r[1] = "999"
+            (data / f"camera_{cid}.txt").write_text("".join(",".join(r) + "\n" for r in lines))
+    scores = _trackeval(mot, tmp_path / "trackers")
+    assert scores["self"] == {"HOTA": 1.0, "MOTA": 1.0, "IDF1": 1.0, "IDSW": 0}
+    assert scores["swapped"]["IDF1"] < 0.9 and scores["swapped"]["IDSW"] == 1
+    assert scores["swapped"]["HOTA"] < 1.0 and scores["swapped"]["MOTA"] < 1.0
+
+
+def test_aicity_world_positions_are_the_3d_box_centres(made: Path, recorded: dict) -> None:
+    coco, images = _coco_by_frame(made)
+    centres = {
+        _stamp(msg): {int(i): msg.centers[3 * k : 3 * k + 3] for k, i in enumerate(msg.ids)}
+        for msg in recorded["boxes3d"]
+    }
+    lines = (made / "aicity" / "ground_truth.txt").read_text().splitlines()
+    assert len(lines) == len(coco.dataset["annotations"]) >= 10
+    cameras = set()
+    for line in lines:
+        camera, obj, frame, x, y, w, h, xw, yw = line.split(" ")
+        im = images[(camera, int(frame))]
+        (ann,) = [a for a in coco.loadAnns(coco.getAnnIds(imgIds=[im["id"]])) if a["track_id"] == int(obj)]
+        assert [int(x), int(y), int(w), int(h)] == ann["bbox"]
+        centre = centres[im["stamp_ns"]][int(obj)]
+        assert (float(xw), float(yw)) == pytest.approx((centre[0], centre[1]), abs=1e-6)
+        cameras.add(camera)
+    assert len(cameras) >= 2  # one file for several cameras, one id per object across them
+    table = (made / "aicity" / "instances.csv").read_text().splitlines()
+    assert table[0] == "id,namespace,name,class_id,class_name"
+    assert table[1].startswith("1,robot_agent_1,pallet_truck,")
+
+
+def test_mot_amodal_boxes_by_flag(made: Path, tmp_path: Path) -> None:
+    proc = run_cli(
+        str(made / "run"),
+        "--format",
+        "mot",
+        "--box",
+        "amodal",
+        "--out",
+        str(tmp_path / "mot"),
+        module="simlan_data.export",
+    )
+    assert proc.returncode == 0, proc.stderr
+    coco, images = _coco_by_frame(made)
+    checked = 0
+    for cid in CAMERAS:
+        gt = tmp_path / "mot" / "SIMLAN-train" / f"camera_{cid}" / "gt" / "gt.txt"
+        for row in gt.read_text().splitlines():
+            frame, track, *box = row.split(",")[:6]
+            im = images[(cid, int(frame) - 1)]
+            (ann,) = [
+                a for a in coco.loadAnns(coco.getAnnIds(imgIds=[im["id"]])) if a["track_id"] == int(track)
+            ]
+            assert [float(v) for v in box] == pytest.approx(ann["attributes"]["amodal_bbox"], abs=0.02)
+            checked += 1
+    assert checked >= 10
+    proc = run_cli(
+        str(made / "run"),
+        "--format",
+        "coco",
+        "--box",
+        "amodal",
+        "--out",
+        str(tmp_path / "c"),
+        module="simlan_data.export",
+    )
+    assert proc.returncode == 2 and "--box" in proc.stderr and proc.stderr.strip().count("\n") == 0
+    assert not (tmp_path / "c").exists()

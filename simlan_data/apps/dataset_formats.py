@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
@@ -50,6 +50,9 @@ class AnnotatedFrame:
     amodal: NDArray[np.float32]
     visible_fraction: NDArray[np.float32]
     truncation: NDArray[np.float32]
+    # the 3D box centres in map (M, 3) at the frame's camera tick, for the ids world_ids
+    world_ids: NDArray[np.uint16] = field(default_factory=lambda: np.zeros(0, dtype=np.uint16))
+    world_centers: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def stem(self) -> str:

@@ -1,13 +1,16 @@
-"""``python -m simlan_data.export RUN --format coco|yolo --out DIR``: a recording's instance ground
-truth as a dataset (issue 25).
+"""``python -m simlan_data.export RUN --format coco|yolo|mot|aicity --out DIR``: a recording's
+instance ground truth as a dataset (issue 25).
 
     python -m simlan_data.export RUN --format coco --out DIR   DIR/images/*.jpg + DIR/annotations/instances.json
     python -m simlan_data.export RUN --format yolo --out DIR   DIR/images/*.jpg + DIR/labels/*.txt + DIR/data.yaml
+    python -m simlan_data.export RUN --format mot --out DIR    DIR/SIMLAN-train/camera_<id>/{img1,gt,seqinfo.ini} + DIR/seqmaps
+    python -m simlan_data.export RUN --format aicity --out DIR DIR/ground_truth.txt + DIR/instances.csv
 
 RUN is a run directory, its recording, or the recording's metadata.yaml; the run must have been
 recorded with ``cameras.streams=[...,instance]`` and JPEG or PNG colour images. Data flow::
 
     bag --reader, time order--> per camera and log time: colour image + instance image + boxes
+                                (+ the latest /ground_truth/boxes: world positions)
         --complete frame--> writer.add (files written at once) --end--> writer.finish (index files)
 
 Exit 0 only when every promised file exists; 2 for bad arguments (an unknown format, a DIR that
@@ -26,23 +29,38 @@ import cv2
 import numpy as np
 
 from simlan_data.apps.cli import run_cli
-from simlan_data.apps.dataset_formats import WRITERS, AnnotatedFrame, InstanceInfo
+from simlan_data.apps.dataset_formats import AnnotatedFrame, CocoWriter, InstanceInfo, YoloWriter
+from simlan_data.apps.tracking_formats import BOXES, AiCityWriter, MotWriter
 from simlan_data.errors import ConfigError, RecordingInputError, RunError
 from simlan_data.recording import schema
 from simlan_data.recording.messages import stamp_ns_of
 from simlan_data.recording.reader import RecordingReader
 
 _STREAMS = ("rgb", "instance", "boxes_2d")
+WRITERS: dict[str, type[CocoWriter | YoloWriter | MotWriter | AiCityWriter]] = {
+    "coco": CocoWriter,
+    "yolo": YoloWriter,
+    "mot": MotWriter,
+    "aicity": AiCityWriter,
+}
+BOXED = ("mot", "aicity")  # the formats that take --box
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m simlan_data.export",
-        description="Export a recording's instance ground truth (stream instance) as a COCO or YOLO dataset.",
+        description="Export a recording's instance ground truth (stream instance) as a COCO, YOLO, "
+        "MOTChallenge or AI City dataset.",
     )
     parser.add_argument("run", help="run directory, recording directory, or its metadata.yaml")
     parser.add_argument("--format", required=True, help=f"dataset format: {' | '.join(WRITERS)}")
     parser.add_argument("--out", type=Path, required=True, help="new or empty output directory")
+    parser.add_argument(
+        "--box",
+        default="visible",
+        help="mot and aicity: the 2D box written, visible (the mask's bounds, default) or amodal "
+        "(the 3D box projected, clipped to the image)",
+    )
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
     return parser
 
@@ -102,10 +120,15 @@ def _jpeg(msg: Any) -> bytes:
 
 
 def frames(reader: RecordingReader, topics: dict[str, tuple[str, str]]) -> Iterator[AnnotatedFrame]:
-    """Complete annotated frames in log-time order; a frame's three messages share its log time."""
+    """Complete annotated frames in log-time order; a frame's three messages share its log time,
+    and its world positions are the 3D boxes of the latest camera tick at or before it."""
     pending: dict[tuple[str, int], dict[str, Any]] = {}
     counts: dict[str, int] = {}
-    for m in reader.messages(list(topics)):
+    world: tuple[np.ndarray, np.ndarray] = (np.zeros(0, dtype=np.uint16), np.zeros((0, 3)))
+    for m in reader.messages([*topics, schema.INSTANCE_BOXES_3D]):
+        if m.topic == schema.INSTANCE_BOXES_3D:
+            world = (np.asarray(m.msg.ids), np.asarray(m.msg.centers, dtype=np.float64).reshape(-1, 3))
+            continue
         cid, stream = topics[m.topic]
         parts = pending.setdefault((cid, m.stamp_ns), {})
         parts[stream] = m.msg
@@ -132,6 +155,8 @@ def frames(reader: RecordingReader, topics: dict[str, tuple[str, str]]) -> Itera
             amodal=np.asarray(boxes.amodal, dtype=np.float32).reshape(-1, 4),
             visible_fraction=np.asarray(boxes.visible_fraction),
             truncation=np.asarray(boxes.truncation),
+            world_ids=world[0],
+            world_centers=world[1],
         )
 
 
@@ -142,7 +167,14 @@ def main(argv: list[str] | None = None) -> int:
             f"invalid --format {args.format!r}",
             "export arguments",
             f"known: {', '.join(WRITERS)}",
-            "use --format coco or --format yolo",
+            f"use --format {' or --format '.join(WRITERS)}",
+        )
+    if args.box not in BOXES or (args.box != "visible" and args.format not in BOXED):
+        raise ConfigError(
+            f"invalid --box {args.box!r}",
+            "export arguments",
+            f"known: {', '.join(BOXES)}; amodal only with --format {' or '.join(BOXED)}",
+            "leave --box out or use --box visible",
         )
     out: Path = args.out
     _check_out(out)
@@ -165,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
         }
         class_names = {int(i): str(n) for i, n in zip(labels.msg.ids, labels.msg.names, strict=True)}
         out.mkdir(parents=True, exist_ok=True)
-        writer = WRITERS[args.format](out, objects, class_names)
+        options = {"box": args.box} if args.format in BOXED else {}
+        writer = WRITERS[args.format](out, objects, class_names, **options)
         try:
             for frame in frames(reader, topics):
                 writer.add(frame)
