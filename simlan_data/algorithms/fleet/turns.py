@@ -4,7 +4,7 @@ A robot on the route graph cannot reverse, and it changes heading by more than t
 only at a node whose clearance covers its reach (``RouteGraph.turnable``). Plain graph distances
 ignore both: from inside a single-lane aisle facing a dead end, the way back looks short although
 the robot can never take it, and a windowed plan guided by them left a pallet truck standing in
-the upper aisle for the rest of an 8-robot mission. The search (``schedule.py``) is guided by plain
+the upper aisle for the rest of an 8-robot mission. The search (``search.py``) is guided by plain
 lengths first (``TurnGraph.to_goal(forward=False)``: as the first guide, forward-only lengths sent
 trucks to the same turning pocket at once) and by forward-only ones when a plan would leave the
 robot standing.
