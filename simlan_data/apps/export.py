@@ -5,6 +5,9 @@ instance ground truth as a dataset (issue 25).
     python -m simlan_data.export RUN --format yolo --out DIR   DIR/images/*.jpg + DIR/labels/*.txt + DIR/data.yaml
     python -m simlan_data.export RUN --format mot --out DIR    DIR/SIMLAN-train/camera_<id>/{img1,gt,seqinfo.ini} + DIR/seqmaps
     python -m simlan_data.export RUN --format aicity --out DIR DIR/ground_truth.txt + DIR/instances.csv
+    python -m simlan_data.export RUN --format trajectory --out DIR [--rate-hz 1]
+                                                               DIR/trajectory.json (SIMLAN's tracker
+                                                               format, any run: apps/trajectory_export.py)
 
 RUN is a run directory, its recording, or the recording's metadata.yaml; the run must have been
 recorded with ``cameras.streams=[...,instance]`` and JPEG or PNG colour images. Data flow::
@@ -31,6 +34,8 @@ import numpy as np
 from simlan_data.apps.cli import run_cli
 from simlan_data.apps.dataset_formats import AnnotatedFrame, CocoWriter, InstanceInfo, YoloWriter
 from simlan_data.apps.tracking_formats import BOXES, AiCityWriter, MotWriter
+from simlan_data.apps.trajectory_export import FILE_NAME as TRAJECTORY_FILE
+from simlan_data.apps.trajectory_export import export_trajectory
 from simlan_data.errors import ConfigError, RecordingInputError, RunError
 from simlan_data.recording import schema
 from simlan_data.recording.messages import stamp_ns_of
@@ -44,6 +49,7 @@ WRITERS: dict[str, type[CocoWriter | YoloWriter | MotWriter | AiCityWriter]] = {
     "aicity": AiCityWriter,
 }
 BOXED = ("mot", "aicity")  # the formats that take --box
+POSE_FORMATS = ("trajectory",)  # ground-truth poses (any run), not instance images
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,13 +59,18 @@ def build_parser() -> argparse.ArgumentParser:
         "MOTChallenge or AI City dataset.",
     )
     parser.add_argument("run", help="run directory, recording directory, or its metadata.yaml")
-    parser.add_argument("--format", required=True, help=f"dataset format: {' | '.join(WRITERS)}")
+    parser.add_argument(
+        "--format", required=True, help=f"dataset format: {' | '.join([*WRITERS, *POSE_FORMATS])}"
+    )
     parser.add_argument("--out", type=Path, required=True, help="new or empty output directory")
     parser.add_argument(
         "--box",
         default="visible",
         help="mot and aicity: the 2D box written, visible (the mask's bounds, default) or amodal "
         "(the 3D box projected, clipped to the image)",
+    )
+    parser.add_argument(
+        "--rate-hz", type=float, default=1.0, help="trajectory: entries per simulated second (default 1)"
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
     return parser
@@ -162,12 +173,18 @@ def frames(reader: RecordingReader, topics: dict[str, tuple[str, str]]) -> Itera
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.format in POSE_FORMATS:
+        _check_out(args.out)
+        entries = export_trajectory(args.run, args.out, rate_hz=args.rate_hz)
+        print(f"exported {entries} stamps ({args.format}) -> {args.out / TRAJECTORY_FILE}")
+        return 0
     if args.format not in WRITERS:
+        known = [*WRITERS, *POSE_FORMATS]
         raise ConfigError(
             f"invalid --format {args.format!r}",
             "export arguments",
-            f"known: {', '.join(WRITERS)}",
-            f"use --format {' or --format '.join(WRITERS)}",
+            f"known: {', '.join(known)}",
+            f"use --format {' or --format '.join(known)}",
         )
     if args.box not in BOXES or (args.box != "visible" and args.format not in BOXED):
         raise ConfigError(

@@ -19,6 +19,7 @@ from simlan_data.algorithms.people import PeopleParams
 from simlan_data.algorithms.posemap.config import PosemapConfig
 from simlan_data.config import collision as collision_scenario
 from simlan_data.config import missions as fleet_missions
+from simlan_data.config import trajectory as trajectory_setup
 from simlan_data.config.agent import AgentConfig
 from simlan_data.config.algorithms import AlgorithmsConfig, register_algorithms, selected_algorithm
 from simlan_data.config.collision import CollisionScenarioConfig
@@ -26,6 +27,7 @@ from simlan_data.config.live import LiveConfig
 from simlan_data.config.missions import MissionsConfig
 from simlan_data.config.randomize import RandomizeConfig
 from simlan_data.config.sensors import SensorsConfig
+from simlan_data.config.trajectory import TrajectoryConfig
 from simlan_data.errors import ConfigError
 from simlan_data.recording.timebase import DEFAULT_EPOCH, parse_epoch
 from simlan_data.world.physics import PhysicsParams
@@ -425,11 +427,13 @@ class Config:
     fleet: MissionsConfig = field(default_factory=MissionsConfig)  # scenario=fleet (config/missions.py)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)  # realistic cameras (config/sensors.py)
     randomize: RandomizeConfig = field(default_factory=RandomizeConfig)  # domain randomization
+    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)  # experiment=trajectory
 
     def __post_init__(self) -> None:
         if _incomplete(self):
             return
         self.posemap.check()
+        self.trajectory.check()
         self.live.check_recording(self.recording.enabled)
         if not 0 < self.duration_s <= 24 * 3600:
             raise _bad(
@@ -538,6 +542,16 @@ def _fleet_missions(key: str, *, _root_: DictConfig) -> Any:
     return value
 
 
+def _trajectory(key: str, *, _root_: DictConfig) -> Any:
+    """``${trajectory:KEY}``: experiment=trajectory's agents and duration from its ``trajectory`` section."""
+    section = OmegaConf.to_container(_root_.trajectory, resolve=True)
+    assert isinstance(section, dict)
+    value = trajectory_setup.resolve(key, section)
+    if key == "agents":  # typed, as a spawn list's entries are
+        return OmegaConf.create({ns: OmegaConf.structured(AgentConfig(**a)) for ns, a in value.items()})
+    return value
+
+
 def register_configs(overrides: list[str] | None = None) -> None:
     """Register the schema and every algorithm with Hydra's ConfigStore (conf/config.yaml lists it first).
 
@@ -550,3 +564,5 @@ def register_configs(overrides: list[str] | None = None) -> None:
         OmegaConf.register_new_resolver("collision_setup", _collision_setup)
     if not OmegaConf.has_resolver("fleet_missions"):
         OmegaConf.register_new_resolver("fleet_missions", _fleet_missions)
+    if not OmegaConf.has_resolver("trajectory"):
+        OmegaConf.register_new_resolver("trajectory", _trajectory)

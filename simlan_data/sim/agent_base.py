@@ -103,6 +103,11 @@ class Agent:
             out.append((corners.min(axis=0).tolist(), corners.max(axis=0).tolist()))
         return out
 
+    def place(self, xyz: Sequence[float], yaw_rad: float) -> None:
+        """Put base_link at ``xyz`` facing ``yaw_rad`` (a kinematic move: a replayed trajectory)."""
+        pos, orn = pb.multiplyTransforms(list(xyz), list(quat_from_yaw(yaw_rad)), *self._com_in_link)
+        pb.resetBasePositionAndOrientation(self.body, pos, orn, physicsClientId=self.client)
+
     def apply_command(self, linear_mps: float, angular_rps: float) -> tuple[float, float]:  # noqa: ARG002 - fixed agents ignore commands
         return (0.0, 0.0)
 

@@ -83,6 +83,7 @@ class WalkerAgent(Agent):
     def __init__(self, client: int, namespace: str, kind: AgentType, *, pose: Sequence[float]) -> None:
         super().__init__(client, namespace, kind, load_body(client, kind, namespace, None, pose, fixed=True))
         self._x, self._y, self._yaw = (float(v) for v in pose)
+        self._z = 0.0
 
     def apply_command(self, linear_mps: float, angular_rps: float) -> tuple[float, float]:
         k = self.kind
@@ -99,9 +100,14 @@ class WalkerAgent(Agent):
         self._y += v * np.sin(self._yaw) * dt_s
         # PyBullet places a base by its centre of mass (0.95 m up in the walker): from base_link
         pos, orn = pb.multiplyTransforms(
-            [self._x, self._y, 0.0], list(quat_from_yaw(self._yaw)), *self._com_in_link
+            [self._x, self._y, self._z], list(quat_from_yaw(self._yaw)), *self._com_in_link
         )
         pb.resetBasePositionAndOrientation(self.body, pos, orn, physicsClientId=self.client)
+
+    def place(self, xyz: Sequence[float], yaw_rad: float) -> None:
+        self._x, self._y, self._z = (float(v) for v in xyz)
+        self._yaw = float(yaw_rad)
+        super().place(xyz, yaw_rad)
 
     def twist(self) -> tuple[float, float]:
         return self.command

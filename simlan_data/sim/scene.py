@@ -102,7 +102,8 @@ def load_inputs(cfg: Config) -> Inputs:
         check_urdf(kind)
     for a in cfg.agent_list:
         check_spawn_pose(a, types[a.namespace], cfg.world.fidelity)
-    check_agents_apart(cfg.agent_list, types)
+    if not cfg.trajectory.file:  # a tracker's objects spawn where it first saw them, at different times
+        check_agents_apart(cfg.agent_list, types)
     nav = cfg.navigation
     if nav.map == "simlan":
         grid = grid_from_nav2_map(MAPS_DIR / "warehouse.yaml", resolution_m=nav.resolution_m)
@@ -218,7 +219,9 @@ class Scene:
         labels = LabelTable()
         for body, label in world.labels.items():
             labels.set(body, label)
-        for agent_cfg in cfg.agent_list:
+        for agent_cfg in (
+            [] if cfg.trajectory.file else cfg.agent_list
+        ):  # (a tracker's agents are where it saw them)
             _check_spawn_clear(cid, agent_cfg, inputs.agent_types[agent_cfg.namespace], world)
         cam_cfg = cfg.cameras
         # (light and sun from randomize: applied to each rendered colour image)

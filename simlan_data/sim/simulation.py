@@ -55,6 +55,7 @@ from simlan_data.sim.rendering import CameraImages
 from simlan_data.sim.scene import Inputs, Scene
 from simlan_data.sim.sensors import CameraSensor, camera_sensors
 from simlan_data.sim.shutter import expose
+from simlan_data.sim.trajectory_drive import TrajectoryDriver, make_trajectory_driver
 from simlan_data.world._pybullet import pb
 
 
@@ -314,6 +315,8 @@ class Simulation:
                 last, stats.stopped_early = max(step - 1, 0), True
                 break
             t = self.stamp_ns(step)
+            if run.tracks is not None:  # replayed trajectories: where the tracker saw them at t
+                run.tracks.place(t)
             if step % self.truth_every == 0:
                 run.pub.ground_truth(t)
             if run.driver is not None and step % self.control_every == 0:
@@ -368,6 +371,7 @@ class Simulation:
             run.schedule = ExposureSchedule(sensors, self.camera_every, self.physics_hz, worst)
             if scene.moved is not None:
                 run.drawn = [MovedAgents(scene.agents) for _ in scene.renderers]
+        run.tracks = make_trajectory_driver(cfg, scene.agents)
         if INSTANCE_STREAM in cfg.cameras.streams:
             run.instances = InstanceRecorder(writer, scene.client.id, scene.instances)
         return run
@@ -550,4 +554,5 @@ class _Run:
     delivered: dict[str, CameraImages]  # per camera, the last frame that was not lost
     schedule: ExposureSchedule | None = None  # late cameras: when each exposes (sensors.timing)
     drawn: list[MovedAgents] = field(default_factory=list)  # per camera: what it last drew (late cameras)
+    tracks: TrajectoryDriver | None = None  # experiment=trajectory: agents on a tracker's trajectories
     instances: InstanceRecorder | None = None  # stream instance: instance images, 2D and 3D boxes
