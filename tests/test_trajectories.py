@@ -145,6 +145,18 @@ def test_the_real_example_runs(tmp_path: Path) -> None:
         module="simlan_data.export",
     )
     assert again.returncode == 2 and "never overwrites" in again.stderr  # refuses to overwrite
+    proc = run_cli(
+        str(tmp_path / "run"),
+        "--format",
+        "trajectory",
+        "--out",
+        str(tmp_path / "out2"),
+        module="simlan_data.export",
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "out2" / "trajectory.json").read_bytes() == (
+        tmp_path / "out" / "trajectory.json"
+    ).read_bytes()
 
 
 @pytest.mark.parametrize(
@@ -176,6 +188,10 @@ def test_a_bad_file_exits_2_with_one_line(tmp_path: Path) -> None:
     proc = run_cli("experiment=trajectory", f"trajectory.file={tmp_path / 'missing.json'}", "progress=false")
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and "trajectory.file" in proc.stderr
+    assert "cannot read it" in proc.stderr
+    # a file without experiment=trajectory: the spawn list's agents are not the file's
+    proc = run_cli("trajectory.file=example_trajectory.json", "progress=false")
+    assert proc.returncode == 2 and "experiment=trajectory" in proc.stderr
 
 
 def test_yaw_from_motion_follows_upstreams_faker() -> None:

@@ -489,6 +489,7 @@ class Config:
                     "not one of cameras.ids",
                     f"use one of {', '.join(map(str, self.cameras.ids))}",
                 )
+        self.trajectory.check_agents(list(self.agents))
         self._jitter_spawn_poses()
         self._check_safety_namespaces()
 

@@ -73,6 +73,19 @@ class TrajectoryConfig:
         if self.max_yaw_step_rad <= 0 or self.min_move_m < 0:
             raise _bad("trajectory.max_yaw_step_rad", self.max_yaw_step_rad, "must be > 0", "use 0.5")
 
+    def check_agents(self, namespaces: list[str]) -> None:
+        """With a file, the run's agents must be the file's (``agents: ${trajectory:agents}``)."""
+        if not self.file:
+            return
+        want = sorted(f"robot_agent_{oid}" for oid in load_tracks(self).ids)
+        if sorted(namespaces) != want:
+            raise _bad(
+                _FIELD,
+                self.file,
+                f"the run's agents {sorted(namespaces)} are not the file's {want}",
+                "run it with experiment=trajectory (its agents come from the file)",
+            )
+
     def type_of(self, oid: int) -> str:
         return self.types.get(str(oid), self.default_type)
 
