@@ -8,7 +8,8 @@ the same generator and seed as the run), the real layout's occupancy grid, and
 ``algorithms/coordinator=fleet`` driving a kinematic fleet (simlan_data/evaluation/fleet_kinematic.py:
 robots follow the coordinator's routes exactly at their mission speed, no physics, no cameras,
 ground-truth poses). Counts goals reached, missions done, deadlocks (the coordinator's), failures,
-the smallest footprint-to-footprint gap, makespan, tasks per hour and the planning time. This
+the smallest footprint-to-footprint gap, makespan, tasks per hour and the planning time (wall, and
+CPU time: on a shared machine the wall time is an upper bound, the CPU time compares runs). This
 measures the coordination itself; the closed loop in the simulator is the sweep in docs/fleet.md.
 Writes JSON with a ``figures`` list (one per fleet size) for benchmarks/summary.py.
 """
@@ -55,9 +56,9 @@ def one(robots: int, seed: int, tasks: int, limit_s: float) -> dict:
     }
     goals = sum(len(a["goals"]) for a in missions.agents.values())
     fleet = KinematicFleet(coordinator, spec, dwell_s=DWELL_S)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     fleet.run(limit_s)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     reached = goals - fleet.goals_left()
     state = coordinator.state
     tasks_done = sum(
@@ -68,7 +69,7 @@ def one(robots: int, seed: int, tasks: int, limit_s: float) -> dict:
         "missions_done": fleet.goals_left() == 0, "deadlocks": state.deadlocks,
         "failures": dict(state.failures), "min_gap_m": round(fleet.min_gap_m(every=5), 3),
         "makespan_s": round(fleet.t_s, 1), "tasks_per_hour": round(3600 * tasks_done / max(fleet.t_s, 1e-9), 1),
-        "replans": state.replans, "wall_s": round(wall, 2),
+        "replans": state.replans, "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
     }  # fmt: skip
 
 
@@ -83,6 +84,7 @@ def summary(rows: list[dict]) -> dict[int, dict]:
             "tasks_per_hour_mean": round(float(np.mean([r["tasks_per_hour"] for r in rs])), 1),
             "makespan_s_mean": round(float(np.mean([r["makespan_s"] for r in rs])), 1),
             "wall_s_per_run": round(float(np.mean([r["wall_s"] for r in rs])), 2),
+            "cpu_s_per_run": round(float(np.mean([r.get("cpu_s", np.nan) for r in rs])), 2),
         }  # fmt: skip
     return out
 
@@ -95,7 +97,7 @@ def figures(table: dict[int, dict], limit_s: float) -> list[dict]:
          "baseline": "none in this benchmark: gpss and independent robots give no routes to drive; the closed loop compares them",
          "note": f"goals {row['goals_reached']}, deadlocks {row['deadlocks']}, smallest gap {row['min_gap_m']} m, "
                  f"{row['tasks_per_hour_mean']} tasks/h, makespan {row['makespan_s_mean']} s (limit {limit_s:g} s), "
-                 f"{row['wall_s_per_run']} s wall per run"}
+                 f"{row['wall_s_per_run']} s wall ({row['cpu_s_per_run']} s CPU) per run"}
         for n, row in table.items()
     ]  # fmt: skip
 
