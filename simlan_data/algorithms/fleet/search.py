@@ -11,19 +11,27 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.fleet import footprint as fp
+from simlan_data.algorithms.fleet.conflicts import ConflictCache
 from simlan_data.algorithms.fleet.footprint import Region
 from simlan_data.algorithms.fleet.graph import RouteGraph
 from simlan_data.algorithms.fleet.plans import Request, RobotPlan, Timing, Vertex, start_region
 from simlan_data.algorithms.fleet.turns import ToGoal
 
-if TYPE_CHECKING:
-    from simlan_data.algorithms.fleet.schedule import Reservations
+
+class Reservations(Protocol):
+    """What the search reads of the reservation table (``schedule.Reservations``; a protocol, so
+    that the table's module can import the search without an import cycle)."""
+
+    conflicts: ConflictCache
+
+    def at(self, step: int) -> Region | None: ...
+
 
 START = -1  # ``prev`` of the start state: the robot stands at its real pose
 FROM_START = -2  # ``prev`` of the first vertex after it: the edge starts at the real pose
