@@ -69,16 +69,9 @@ class _Sequence:
     images: list[Path] = field(default_factory=list)
 
 
-class MotWriter:
-    """MOTChallenge ground truth, one sequence per camera, in the layout TrackEval's
-    ``MotChallenge2DBox`` reads with ``GT_FOLDER=<out>``, ``BENCHMARK=SIMLAN``, ``SPLIT_TO_EVAL=train``::
-
-        <out>/SIMLAN-train/camera_<id>/img1/000001.jpg ...   frames, 1-based
-        <out>/SIMLAN-train/camera_<id>/gt/gt.txt              frame,id,left,top,width,height,conf,class,visibility
-        <out>/SIMLAN-train/camera_<id>/seqinfo.ini
-        <out>/seqmaps/SIMLAN-train.txt                        name, then one sequence a line
-        <out>/instances.csv                                   track id -> namespace, name, class
-    """
+class _TrackingWriter:
+    """What both tracking formats are made of: the output folder, the instance table, the class
+    names and which 2D box they write (``visible`` or ``amodal``)."""
 
     def __init__(
         self,
@@ -89,6 +82,26 @@ class MotWriter:
         box: str = "visible",
     ) -> None:
         self.out, self.objects, self.class_names, self.box = out, objects, class_names, box
+        self._open()
+
+    def _open(self) -> None:
+        """Create what the format writes into (its folders, its files)."""
+        raise NotImplementedError
+
+
+class MotWriter(_TrackingWriter):
+    """MOTChallenge ground truth, one sequence per camera, in the layout TrackEval's
+    ``MotChallenge2DBox`` reads with ``GT_FOLDER=<out>``, ``BENCHMARK=SIMLAN``, ``SPLIT_TO_EVAL=train``::
+
+        <out>/SIMLAN-train/camera_<id>/img1/000001.jpg ...   frames, 1-based
+        <out>/SIMLAN-train/camera_<id>/gt/gt.txt              frame,id,left,top,width,height,conf,class,visibility
+        <out>/SIMLAN-train/camera_<id>/seqinfo.ini
+        <out>/seqmaps/SIMLAN-train.txt                        name, then one sequence a line
+        <out>/instances.csv                                   track id -> namespace, name, class
+    """
+
+    def _open(self) -> None:
+        out = self.out
         self.split = out / f"{MOT_BENCHMARK}-{MOT_SPLIT}"
         self.split.mkdir(parents=True)
         (out / "seqmaps").mkdir()
@@ -153,7 +166,7 @@ def _frame_rate(seq: _Sequence) -> int:
     return max(1, round((seq.length - 1) * 1e9 / (seq.last_ns - seq.first_ns)))
 
 
-class AiCityWriter:
+class AiCityWriter(_TrackingWriter):
     """The AI City Challenge 2024 track 1 (multi-camera people tracking) ground-truth text: one
     file for all cameras, one space-separated line per object seen in a camera frame::
 
@@ -166,15 +179,8 @@ class AiCityWriter:
     robots, pallet trucks, pallets and boxes).
     """
 
-    def __init__(
-        self,
-        out: Path,
-        objects: dict[int, InstanceInfo],
-        class_names: dict[int, str],
-        *,
-        box: str = "visible",
-    ) -> None:
-        self.out, self.objects, self.class_names, self.box = out, objects, class_names, box
+    def _open(self) -> None:
+        out = self.out
         self._txt: IO[str] = (out / AICITY_TXT).open("w")
         self.files: list[Path] = [out / AICITY_TXT, out / INSTANCES_CSV]
         self.image_count = self.annotation_count = 0
