@@ -403,3 +403,13 @@ def test_every_effect_disabled_is_byte_identical_to_no_group(runs: dict[str, Pat
         assert a == b, topic
     frame = cv2.imdecode(np.frombuffer(default["/camera_163/image_raw/compressed"][0][1].data, np.uint8), 1)
     assert frame is not None and frame.mean() > 10  # (real images were compared)
+
+
+def test_replay_reproduces_the_live_estimates_of_a_randomized_run(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    """The recorded images are the randomized ones: the replay's localizer sees what the live one saw."""
+    proc = run_cli(str(runs["on"]), "--out", str(tmp_path / "replay"), module="simlan_data.replay")
+    assert proc.returncode == 0, proc.stderr
+    line = next(x for x in proc.stdout.splitlines() if "replay.localization.max_diff_to_live_m" in x)
+    assert float(line.split()[1]) <= 1e-9
