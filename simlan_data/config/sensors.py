@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from simlan_data.errors import ConfigError
 
-MAX_LAG_S = 1.0  # how far back a frame may show the scene (the pose history the simulation keeps)
+MAX_LAG_S = 1.0  # how far back a frame may show the scene (the frames the simulation holds back)
 
 
 def _at_least(key: str, value: float, low: float, fix: str) -> None:
@@ -125,8 +125,7 @@ class TimingConfig:
         _at_least("sensors.timing.exposure_spread_s", self.exposure_spread_s, 0.0, "use 0 or up to 1/fps")
         _at_least("sensors.timing.delay_s", self.delay_s, 0.0, "use 0.03")
         _at_least("sensors.timing.delay_jitter_s", self.delay_jitter_s, 0.0, "use 0.005")
-        worst = self.exposure_spread_s + self.delay_s + 4 * self.delay_jitter_s
-        if worst > MAX_LAG_S:
+        if self.max_lag_s > MAX_LAG_S:
             raise ConfigError.invalid(
                 "sensors.timing",
                 f"exposure_spread_s={self.exposure_spread_s}, delay_s={self.delay_s}, "
@@ -142,6 +141,12 @@ class TimingConfig:
                 "must be within 0..1 (1 would drop every frame)",
                 "use 0.01",
             )
+
+    @property
+    def max_lag_s(self) -> float:
+        """The longest a frame may show the scene before it arrives: phase + delay + 4 x jitter
+        (a larger jitter draw is clipped to it)."""
+        return self.exposure_spread_s + self.delay_s + 4 * self.delay_jitter_s
 
 
 @dataclass
@@ -212,8 +217,7 @@ class SensorsConfig:
     @property
     def lagged(self) -> bool:
         """Frames may show the scene before the tick that delivers them (spread or delay)."""
-        t = self.timing
-        return t.enabled and (t.exposure_spread_s > 0 or t.delay_s > 0 or t.delay_jitter_s > 0)
+        return self.timing.enabled and self.timing.max_lag_s > 0
 
     @property
     def active(self) -> bool:

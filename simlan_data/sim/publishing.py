@@ -141,7 +141,7 @@ class Publisher:
         topic = schema.camera_topics(camera.camera_id, rgb="jpeg", depth=None, semantic=None)["effects"]
         build = functools.partial(
             M.camera_effects,
-            self.writer.stamp_ns(shot.exposed_ns if shot.exposed_ns >= 0 else t),
+            self.writer.stamp_ns(shot.exposed_ns),
             camera.frame_id,
             self.writer.stamp_ns(shot.stamp_ns),
             dropped=shot.dropped,
@@ -153,7 +153,7 @@ class Publisher:
             exposure_time_s=sensor.exposure_time_s() if sensor.cfg.shutter.enabled else 0.0,
             line_time_s=sensor.cfg.shutter.line_time_s if sensor.cfg.shutter.enabled else 0.0,
             subframes=shot.subframes,
-            delay_s=(t - shot.exposed_ns) / 1e9 if shot.exposed_ns >= 0 else 0.0,
+            delay_s=(t - shot.exposed_ns) / 1e9,
         )
         self.writer.submit(topic, t, build)  # built and serialized on a worker thread
 

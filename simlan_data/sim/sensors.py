@@ -133,8 +133,8 @@ class Capture:
     exposure_scale: float  # the camera's exposure time, relative to the reference
     gain: float
     light: float  # the scene's light relative to the rendered (sensors.photometric.lighting)
+    exposed_ns: int  # simulated time its exposure truly ended (the tick less phase and delay)
     subframes: int = 1  # renders averaged into the image (motion blur, rolling shutter)
-    exposed_ns: int = -1  # simulated time its exposure truly ended (the tick less phase and delay)
 
 
 class CameraSensor:
@@ -182,7 +182,7 @@ class CameraSensor:
         """How long before the tick the next frame's exposure ended: the camera's phase plus this
         frame's transport delay (call once per frame, before rendering it)."""
         t = self.cfg.timing
-        if not (t.enabled and (t.exposure_spread_s > 0 or t.delay_s > 0 or t.delay_jitter_s > 0)):
+        if not self.cfg.lagged:
             return 0.0
         delay = t.delay_s + float(self._delays.normal(0.0, 1.0)) * t.delay_jitter_s
         return self.phase_s + max(0.0, delay)
@@ -220,4 +220,4 @@ class CameraSensor:
             changed = images.changed or (self._settings is not None and self._settings != now)
             self._settings = now
             images = replace(images, rgb=rgb, changed=changed)
-        return Capture(images, stamp, dropped, phase, exposure, gain, light, subframes, exposed)
+        return Capture(images, stamp, dropped, phase, exposure, gain, light, exposed, subframes)

@@ -366,9 +366,8 @@ class Simulation:
         driver = make_driver(cfg, scene.agents, writer, self.inputs.posemap)  # motion files or the drive
         run = _Run(scene, writer, stats, pub, stack, recorder, driver, in_contact, last_xy, sensors, {})
         if cfg.sensors.lagged:  # frames show the scene before their tick: keep the agents' past
-            t = cfg.sensors.timing
-            worst = t.exposure_spread_s + t.delay_s + 4 * t.delay_jitter_s
-            run.schedule = ExposureSchedule(sensors, self.camera_every, self.physics_hz, worst)
+            lag = cfg.sensors.timing.max_lag_s
+            run.schedule = ExposureSchedule(sensors, self.camera_every, self.physics_hz, lag)
             if scene.moved is not None:
                 run.drawn = [MovedAgents(scene.agents) for _ in scene.renderers]
         run.tracks = make_trajectory_driver(cfg, scene.agents)
