@@ -94,6 +94,11 @@ def run_cli(
     )
 
 
+def export_cli(run: Path, fmt: str, out: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    """``python -m simlan_data.export RUN --format FMT [EXTRA ...] --out OUT``, as users run it."""
+    return run_cli(str(run), "--format", fmt, *extra, "--out", str(out), module="simlan_data.export")
+
+
 def compose_config(*overrides: str):
     """Compose the Hydra config as the app does, without a process (DictConfig)."""
     register_configs(list(overrides))  # the schema and every algorithm, as the app does first

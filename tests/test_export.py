@@ -17,7 +17,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from pycocotools.coco import COCO
 
-from conftest import made_once, run_cli
+from conftest import export_cli, made_once, run_cli
 
 CAMERAS = ("160", "161", "162")  # 160 and 161 overlap where the robot drives
 RUN = (
@@ -36,9 +36,7 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
         proc = run_cli(*RUN, f"hydra.run.dir={root / 'run'}")
         assert proc.returncode == 0, proc.stderr
         for fmt in FORMATS:
-            proc = run_cli(
-                str(root / "run"), "--format", fmt, "--out", str(root / fmt), module="simlan_data.export"
-            )
+            proc = export_cli(root / "run", fmt, root / fmt)
             assert proc.returncode == 0, proc.stderr
 
     return made_once(tmp_path_factory, "export_runs", make)
@@ -164,15 +162,11 @@ def _digest(root: Path) -> str:
 
 def test_export_is_deterministic_and_never_overwrites(made: Path, tmp_path: Path) -> None:
     for fmt in FORMATS:
-        proc = run_cli(
-            str(made / "run"), "--format", fmt, "--out", str(tmp_path / fmt), module="simlan_data.export"
-        )
+        proc = export_cli(made / "run", fmt, tmp_path / fmt)
         assert proc.returncode == 0, proc.stderr
         assert _digest(tmp_path / fmt) == _digest(made / fmt)
     before = _digest(tmp_path / "coco")
-    proc = run_cli(
-        str(made / "run"), "--format", "coco", "--out", str(tmp_path / "coco"), module="simlan_data.export"
-    )
+    proc = export_cli(made / "run", "coco", tmp_path / "coco")
     assert proc.returncode == 2
     assert (
         proc.stderr.strip().count("\n") == 0
@@ -182,14 +176,10 @@ def test_export_is_deterministic_and_never_overwrites(made: Path, tmp_path: Path
     assert _digest(tmp_path / "coco") == before
     for fmt in ("mot", "aicity"):
         before = _digest(tmp_path / fmt)
-        proc = run_cli(
-            str(made / "run"), "--format", fmt, "--out", str(tmp_path / fmt), module="simlan_data.export"
-        )
+        proc = export_cli(made / "run", fmt, tmp_path / fmt)
         assert proc.returncode == 2 and "choose a new --out" in proc.stderr
         assert _digest(tmp_path / fmt) == before
-    proc = run_cli(
-        str(made / "run"), "--format", "voc", "--out", str(tmp_path / "voc"), module="simlan_data.export"
-    )
+    proc = export_cli(made / "run", "voc", tmp_path / "voc")
     assert proc.returncode == 2 and "--format" in proc.stderr and proc.stderr.strip().count("\n") == 0
     assert not (tmp_path / "voc").exists()
 
@@ -314,16 +304,7 @@ def test_aicity_world_positions_are_the_3d_box_centres(made: Path, recorded: dic
 
 
 def test_mot_amodal_boxes_by_flag(made: Path, tmp_path: Path) -> None:
-    proc = run_cli(
-        str(made / "run"),
-        "--format",
-        "mot",
-        "--box",
-        "amodal",
-        "--out",
-        str(tmp_path / "mot"),
-        module="simlan_data.export",
-    )
+    proc = export_cli(made / "run", "mot", tmp_path / "mot", "--box", "amodal")
     assert proc.returncode == 0, proc.stderr
     coco, images = _coco_by_frame(made)
     checked = 0
@@ -338,15 +319,6 @@ def test_mot_amodal_boxes_by_flag(made: Path, tmp_path: Path) -> None:
             assert [float(v) for v in box] == pytest.approx(ann["attributes"]["amodal_bbox"], abs=0.02)
             checked += 1
     assert checked >= 10
-    proc = run_cli(
-        str(made / "run"),
-        "--format",
-        "coco",
-        "--box",
-        "amodal",
-        "--out",
-        str(tmp_path / "c"),
-        module="simlan_data.export",
-    )
+    proc = export_cli(made / "run", "coco", tmp_path / "c", "--box", "amodal")
     assert proc.returncode == 2 and "--box" in proc.stderr and proc.stderr.strip().count("\n") == 0
     assert not (tmp_path / "c").exists()

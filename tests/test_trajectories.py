@@ -17,7 +17,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from conftest import made_once, run_cli
+from conftest import export_cli, made_once, run_cli
 from simlan_data.algorithms.trajectory import fake_yaw
 from simlan_data.config import trajectory as setup
 from simlan_data.errors import ConfigError
@@ -48,14 +48,7 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
         types = ("+trajectory.types.7=jackal", "+trajectory.types.12=humanoid")
         proc = run_cli(*args, *types, f"hydra.run.dir={root / 'run'}")
         assert proc.returncode == 0, proc.stderr
-        proc = run_cli(
-            str(root / "run"),
-            "--format",
-            "trajectory",
-            "--out",
-            str(root / "out"),
-            module="simlan_data.export",
-        )
+        proc = export_cli(root / "run", "trajectory", root / "out")
         assert proc.returncode == 0, proc.stderr
         proc = run_cli(str(root / "run"), "--out", str(root / "replay"), module="simlan_data.replay")
         assert proc.returncode == 0, proc.stderr
@@ -120,14 +113,7 @@ def test_the_replay_scores_the_localizer_against_the_tracker(made: Path) -> None
 def test_the_real_example_runs(tmp_path: Path) -> None:
     proc = run_cli("experiment=trajectory", "progress=false", CAMERAS, f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode == 0, proc.stderr
-    proc = run_cli(
-        str(tmp_path / "run"),
-        "--format",
-        "trajectory",
-        "--out",
-        str(tmp_path / "out"),
-        module="simlan_data.export",
-    )
+    proc = export_cli(tmp_path / "run", "trajectory", tmp_path / "out")
     assert proc.returncode == 0, proc.stderr
     source = json.loads(Path(setup.TRAJECTORIES_DIR / "example_trajectory.json").read_text())
     exported = json.loads((tmp_path / "out" / "trajectory.json").read_text())
@@ -136,23 +122,9 @@ def test_the_real_example_runs(tmp_path: Path) -> None:
         assert np.allclose(
             [r[1:4] for r in got["object_list"]], [r[1:4] for r in want["object_list"]], atol=1e-5
         )
-    again = run_cli(
-        str(tmp_path / "run"),
-        "--format",
-        "trajectory",
-        "--out",
-        str(tmp_path / "out"),
-        module="simlan_data.export",
-    )
+    again = export_cli(tmp_path / "run", "trajectory", tmp_path / "out")
     assert again.returncode == 2 and "never overwrites" in again.stderr  # refuses to overwrite
-    proc = run_cli(
-        str(tmp_path / "run"),
-        "--format",
-        "trajectory",
-        "--out",
-        str(tmp_path / "out2"),
-        module="simlan_data.export",
-    )
+    proc = export_cli(tmp_path / "run", "trajectory", tmp_path / "out2")
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "out2" / "trajectory.json").read_bytes() == (
         tmp_path / "out" / "trajectory.json"
