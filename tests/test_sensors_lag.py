@@ -74,4 +74,3 @@ def test_a_delay_of_one_period_delivers_the_previous_ticks_image_stamped_with_it
     assert matched == 11 * 10  # 11 cameras, 10 late ticks in 2 s
     assert ideal_truth == late_truth  # rendering the past never touched the physics
     assert sorted(set(delays.values()))[-1] == pytest.approx(PERIOD_S)
-
