@@ -143,3 +143,22 @@ class Tracks:
                 a = a + f * float(wrap_angle(float(np.nan_to_num(self.yaw[nxt, j], nan=a)) - a))
             out.append((float(p[0]), float(p[1]), float(p[2]), float(wrap_angle(a))))
         return out
+
+    def velocities(self, t_ns: int) -> list[tuple[float, float]]:
+        """Every object's ``(v, w)`` at ``t_ns``: the constant velocity of the interpolation between the
+        stamps around ``t_ns`` (``v`` along the object's heading, signed; ``w`` its turn rate), zero
+        where the object is held or absent. What a robot on that motion is commanded (upstream's
+        ``scenario_replay`` feeds the tracker's velocities as ``cmd_vel`` the same way)."""
+        k = min(max(int(np.searchsorted(self.stamps_ns, t_ns, side="right")) - 1, 0), len(self.stamps_ns) - 1)
+        nxt = min(k + 1, len(self.stamps_ns) - 1)
+        span_s = float(self.stamps_ns[nxt] - self.stamps_ns[k]) / 1e9
+        out = []
+        for j, pose in enumerate(self.at(t_ns)):
+            if pose is None or span_s <= 0 or np.isnan(self.xyz[k, j, 0]) or np.isnan(self.xyz[nxt, j, 0]):
+                out.append((0.0, 0.0))
+                continue
+            dx, dy = (self.xyz[nxt, j, :2] - self.xyz[k, j, :2]) / span_s
+            a0 = float(np.nan_to_num(self.yaw[k, j]))
+            dyaw = float(wrap_angle(float(np.nan_to_num(self.yaw[nxt, j], nan=a0)) - a0))
+            out.append((float(dx * math.cos(pose[3]) + dy * math.sin(pose[3])), dyaw / span_s))
+        return out

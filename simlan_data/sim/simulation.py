@@ -502,9 +502,11 @@ class Simulation:
     def _drive(self, run: _Run, t: int, out: ControlOutput, hits: dict[str, CollisionReading]) -> None:
         """Apply each agent's command to its wheels, count new collisions, publish command and plan."""
         stack, pub, stats = run.stack, run.pub, run.stats
+        tracked = {} if run.tracks is None else run.tracks.commands(t)  # the tracker moves these
         for agent in run.scene.agents:
             ns = agent.namespace
             v, w = agent.apply_command(*out.commands.get(ns, (0.0, 0.0)))
+            v, w = tracked.get(ns, (v, w))
             stack.localizer.command(t, ns, v, w)
             hit = hits[ns]
             if hit.in_collision and not run.in_contact[ns]:

@@ -43,6 +43,11 @@ class TrajectoryDriver:
             else:
                 agent.place(pose[:3], pose[3])
 
+    def commands(self, t_ns: int) -> dict[str, tuple[float, float]]:
+        """Each tracked agent's velocity at ``t_ns`` (``Tracks.velocities``), by namespace: what the
+        localizer is told it was commanded, and what is recorded on its ``cmd_vel``."""
+        return {a.namespace: vw for a, vw in zip(self.agents, self.tracks.velocities(t_ns), strict=True)}
+
 
 def make_trajectory_driver(cfg: Config, agents: list[Agent]) -> TrajectoryDriver | None:
     """The driver of a run with a tracker file (``trajectory.file``; the config checked that the
