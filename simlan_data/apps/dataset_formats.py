@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
@@ -18,45 +17,11 @@ import numpy as np
 from numpy.typing import NDArray
 from pycocotools import mask as coco_mask
 
+# the frames every writer takes: read by the reader the tracking metrics share
+from simlan_data.evaluation.instance_truth import AnnotatedFrame, InstanceInfo
+
 COCO_JSON = Path("annotations") / "instances.json"
 YOLO_YAML = "data.yaml"
-
-
-@dataclass(frozen=True)
-class InstanceInfo:
-    """One row of the recording's instance table."""
-
-    id: int
-    namespace: str
-    name: str
-    class_id: int
-
-
-@dataclass(frozen=True)
-class AnnotatedFrame:
-    """One camera frame with its ground truth: the JPEG bytes, the instance image and the boxes
-    message's arrays (visible boxes (N, 4) as u0 v0 u1 v1, u1 and v1 exclusive)."""
-
-    camera_id: str
-    index: int  # the frame's number in its camera, from 0
-    stamp_ns: int  # header stamp (bag time)
-    jpeg: bytes
-    width: int
-    height: int
-    instances: NDArray[np.uint16]
-    ids: NDArray[np.uint16]
-    pixels: NDArray[np.uint32]
-    visible: NDArray[np.int32]
-    amodal: NDArray[np.float32]
-    visible_fraction: NDArray[np.float32]
-    truncation: NDArray[np.float32]
-    # the 3D box centres in map (M, 3) at the frame's camera tick, for the ids world_ids
-    world_ids: NDArray[np.uint16] = field(default_factory=lambda: np.zeros(0, dtype=np.uint16))
-    world_centers: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
-
-    @property
-    def stem(self) -> str:
-        return f"camera_{self.camera_id}_{self.index:06d}"
 
 
 def _dumps(value: Any) -> str:
