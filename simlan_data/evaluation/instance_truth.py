@@ -6,6 +6,7 @@ The run must have been recorded with ``cameras.streams=[...,instance]`` and JPEG
 images. Data flow::
 
     bag --reader, time order--> per camera and log time: colour image + instance image + boxes
+                                (+ the people's keypoints where recorded)
                                 (+ the latest /ground_truth/boxes: world positions)
         --complete frame--> AnnotatedFrame (index: the camera's complete frames counted from 0)
 
@@ -27,8 +28,10 @@ from simlan_data.errors import RecordingInputError, RunError
 from simlan_data.recording import schema
 from simlan_data.recording.messages import stamp_ns_of
 from simlan_data.recording.reader import RecordingReader
+from simlan_data.world.skeleton import NUM_LANDMARKS
 
 _STREAMS = ("rgb", "instance", "boxes_2d")
+_OPTIONAL = ("keypoints",)  # recorded only in scenes with people: a frame waits for it where present
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,12 @@ class AnnotatedFrame:
     # the 3D box centres in map (M, 3) at the frame's camera tick, for the ids world_ids
     world_ids: NDArray[np.uint16] = field(default_factory=lambda: np.zeros(0, dtype=np.uint16))
     world_centers: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    # every person's 33 landmarks (P, 33, 3) as u, v (OpenCV pixels) and COCO visibility 0/1/2,
+    # for the person instance ids keypoint_ids (P,); empty where the recording has no keypoints
+    keypoint_ids: NDArray[np.uint16] = field(default_factory=lambda: np.zeros(0, dtype=np.uint16))
+    keypoints: NDArray[np.float32] = field(
+        default_factory=lambda: np.zeros((0, NUM_LANDMARKS, 3), dtype=np.float32)
+    )
 
     @property
     def stem(self) -> str:
@@ -83,7 +92,7 @@ def camera_topics(reader: RecordingReader) -> dict[str, tuple[str, str]]:
                     **schema.camera_topics(cid, rgb=rgb, depth=None, semantic=None),
                     **schema.instance_topics(cid),
                 }
-                for stream in _STREAMS:
+                for stream in (*_STREAMS, *_OPTIONAL):
                     if topics[stream].name in reader.topics:
                         out[topics[stream].name] = (cid, stream)
     if not out:
@@ -152,6 +161,9 @@ def frames(
     """
     pending: dict[tuple[str, int], dict[str, Any]] = {}
     counts: dict[str, int] = {}
+    needed: dict[str, int] = {}  # per camera: how many messages make a frame
+    for cid, _ in topics.values():
+        needed[cid] = needed.get(cid, 0) + 1
     world: tuple[np.ndarray, np.ndarray] = (np.zeros(0, dtype=np.uint16), np.zeros((0, 3)))
     for m in reader.messages([*topics, schema.INSTANCE_BOXES_3D]):
         if m.topic == schema.INSTANCE_BOXES_3D:
@@ -160,7 +172,7 @@ def frames(
         cid, stream = topics[m.topic]
         parts = pending.setdefault((cid, m.stamp_ns), {})
         parts[stream] = m.msg
-        if len(parts) < len(_STREAMS):
+        if len(parts) < needed[cid]:
             continue
         del pending[(cid, m.stamp_ns)]
         for key in [k for k in pending if k[0] == cid and k[1] < m.stamp_ns]:  # (incomplete: left out)
@@ -189,4 +201,17 @@ def frames(
             truncation=np.asarray(boxes.truncation),
             world_ids=world[0],
             world_centers=world[1],
+            **_keypoints(parts.get("keypoints")),
         )
+
+
+def _keypoints(msg: Any) -> dict[str, Any]:
+    """AnnotatedFrame's keypoint fields from an InstanceKeypoints message (none: empty)."""
+    if msg is None:
+        return {}
+    ids = np.asarray(msg.ids, dtype=np.uint16)
+    u, v, vis = (
+        np.asarray(a, dtype=np.float32).reshape(len(ids), NUM_LANDMARKS)
+        for a in (msg.u, msg.v, msg.visibility)
+    )
+    return {"keypoint_ids": ids, "keypoints": np.stack([u, v, vis], axis=-1)}

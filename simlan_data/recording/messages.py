@@ -56,6 +56,7 @@ CameraEffectsMsg = T[schema.CAMERA_EFFECTS_TYPE]
 InstanceTableMsg = T[schema.INSTANCE_TABLE_TYPE]
 InstanceBoxes2DMsg = T[schema.INSTANCE_BOXES_2D_TYPE]
 InstanceBoxes3DMsg = T[schema.INSTANCE_BOXES_3D_TYPE]
+InstanceKeypointsMsg = T[schema.INSTANCE_KEYPOINTS_TYPE]
 MARKER_ADD, MARKER_LINE_STRIP, MARKER_TEXT = 0, 4, 9  # visualization_msgs/Marker constants
 
 
@@ -558,4 +559,18 @@ def instance_boxes_3d(
         centers=np.asarray(centers, dtype=np.float64).reshape(-1),
         sizes=np.asarray(sizes, dtype=np.float64).reshape(-1),
         yaw_rad=np.asarray(yaw_rad, dtype=np.float64),
+    )
+
+
+def instance_keypoints(stamp_ns: int, camera: CameraModel, keypoints: Any) -> Any:
+    """One camera frame's keypoints from arrays ``ids`` (N,), ``uv`` (N, 33, 2), ``visibility`` (N, 33)."""
+    uv = np.asarray(keypoints.uv, dtype=np.float32).reshape(-1, 2)
+    return InstanceKeypointsMsg(
+        header=header(stamp_ns, camera.frame_id),
+        width=camera.width,
+        height=camera.height,
+        ids=np.asarray(keypoints.ids, dtype=np.uint16),
+        u=np.ascontiguousarray(uv[:, 0]),
+        v=np.ascontiguousarray(uv[:, 1]),
+        visibility=np.asarray(keypoints.visibility, dtype=np.uint8).reshape(-1),
     )

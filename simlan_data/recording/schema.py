@@ -57,6 +57,7 @@ CAMERA_EFFECTS_TYPE = "simlan_msgs/msg/CameraEffects"
 INSTANCE_TABLE_TYPE = "simlan_msgs/msg/InstanceTable"
 INSTANCE_BOXES_2D_TYPE = "simlan_msgs/msg/InstanceBoxes2D"
 INSTANCE_BOXES_3D_TYPE = "simlan_msgs/msg/InstanceBoxes3D"
+INSTANCE_KEYPOINTS_TYPE = "simlan_msgs/msg/InstanceKeypoints"
 
 # ------------------------------------------------------------------------------------- topics
 CLOCK = "/clock"
@@ -187,7 +188,8 @@ def camera_topics(
 
 
 def instance_topics(camera_id: str | int) -> dict[str, Topic]:
-    """Topics of one camera's ``instance`` stream (issue 25): keys ``instance`` and ``boxes_2d``."""
+    """Topics of one camera's ``instance`` stream (issue 25): keys ``instance``, ``boxes_2d`` and
+    ``keypoints`` (recorded only in scenes with people)."""
     base = f"/camera_{camera_id}"
     return {
         "instance": Topic(
@@ -199,6 +201,11 @@ def instance_topics(camera_id: str | int) -> dict[str, Topic]:
             f"{base}/instances/boxes",
             INSTANCE_BOXES_2D_TYPE,
             "per instance in the image: visible box (mask), amodal box (3D box projected), visible fraction, truncation",
+        ),
+        "keypoints": Topic(
+            f"{base}/instances/keypoints",
+            INSTANCE_KEYPOINTS_TYPE,
+            "per person instance: 33 body landmarks (MediaPipe order) in pixels, COCO visibility 0/1/2 (scenes with people)",
         ),
     }
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pybullet_data
+from numpy.typing import NDArray
 
 from simlan_data.constants import URDF_DIR
 from simlan_data.errors import ConfigError
@@ -74,6 +75,11 @@ class Agent:
         pos, orn = pb.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
         pos, orn = pb.multiplyTransforms(pos, orn, *self._link_in_com)
         return Transform.from_quat(pos, orn)
+
+    def landmarks(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """A person's 33 body landmarks (MediaPipe Pose's order) in map (33, 3) and how deep under
+        the body's surface each lies (33,); None for an agent that is not a person."""
+        return None
 
     def twist(self) -> tuple[float, float]:
         """Ground-truth forward speed (m/s, along base_link x) and yaw rate (rad/s)."""

@@ -14,12 +14,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from simlan_data.geometry.rotations import quat_from_yaw
 from simlan_data.sim.agent_base import Agent, CollisionReading, load_body, urdf_with_marker
 from simlan_data.sim.humanoid import PosedHumanoidAgent
 from simlan_data.world._pybullet import pb
 from simlan_data.world.agent_types import AGENT_TYPES, AgentType, agent_type
+from simlan_data.world.walker_landmarks import WALKER_INSIDE_M, WALKER_LANDMARKS_M
 
 __all__ = [
     "AGENT_TYPES",
@@ -111,6 +113,10 @@ class WalkerAgent(Agent):
 
     def twist(self) -> tuple[float, float]:
         return self.command
+
+    def landmarks(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The walker's fixed landmarks (``world/walker_landmarks.py``) at its current pose."""
+        return self.pose().apply(WALKER_LANDMARKS_M), WALKER_INSIDE_M
 
 
 class StaticAgent(Agent):

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from simlan_data.sim.agent_base import Agent, load_body
 from simlan_data.world._pybullet import pb
 from simlan_data.world.agent_types import AgentType
-from simlan_data.world.skeleton import JOINT_NAMES, LOWER, UPPER, landmark_positions
+from simlan_data.world.skeleton import JOINT_NAMES, LANDMARK_INSIDE_M, LOWER, UPPER, landmark_positions
 
 HOLD_FORCE_N = 1000.0
 
@@ -54,6 +54,11 @@ class PosedHumanoidAgent(Agent):
     def landmarks_world(self) -> NDArray[np.float64]:
         """World positions (33, 3) of the MediaPipe landmarks for the current targets."""
         return landmark_positions(self.targets[None], self.pose().matrix())[0]
+
+    def landmarks(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The landmarks where the body is drawn: at the measured joints (the motors hold the
+        targets against gravity, a fraction of a millimetre off), unlike :meth:`landmarks_world`."""
+        return landmark_positions(self.joint_positions()[None], self.pose().matrix())[0], LANDMARK_INSIDE_M
 
     def aabb(self) -> tuple[list[float], list[float]]:
         """One box around the whole body (the layered renderer draws one region per camera)."""

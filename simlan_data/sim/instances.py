@@ -1,4 +1,4 @@
-"""Instance ground truth (issue 25): which object each pixel shows, 2D and 3D boxes, recorded.
+"""Instance ground truth (issue 25): which object each pixel shows, 2D and 3D boxes, keypoints, recorded.
 
 Data flow per camera tick (stream ``instance``)::
 
@@ -10,6 +10,8 @@ Data flow per camera tick (stream ``instance``)::
                           v                    v
                  visible boxes (mask) + amodal boxes, visible fraction, truncation
                                                --> /camera_<id>/instances/boxes
+    people's 33 landmarks --camera + the render's depth--> /camera_<id>/instances/keypoints
+                                                           (sim/keypoints.py; scenes with people)
 
 Instance ids: 1..A for the agents in config order, then the world's movable objects (pallets,
 boxes) by body id; the same in every camera for the whole run: they are the track ids.
@@ -18,7 +20,7 @@ boxes) by body id; the same in every camera for the whole run: they are the trac
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
 import cv2
@@ -32,6 +34,7 @@ from simlan_data.recording import messages as M
 from simlan_data.recording import schema
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.sim.agent_base import Agent
+from simlan_data.sim.keypoints import DepthSource, frame_keypoints
 from simlan_data.sim.rendering import CameraImages, LabelTable
 from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import WorldBodies
@@ -59,6 +62,12 @@ def instance_objects(agents: Sequence[Agent], world: WorldBodies) -> list[Instan
             InstanceObject(len(rows) + 1, body, "", world.names.get(body, ""), world.labels.get(body, 0))
         )
     return rows
+
+
+def people_instances(agents: Sequence[Agent], objects: Sequence[InstanceObject]) -> list[tuple[int, Agent]]:
+    """(instance id, agent) of every person among the agents (those with body landmarks)."""
+    ids = {obj.body: obj.id for obj in objects}
+    return [(ids[a.body], a) for a in agents if a.body in ids and a.landmarks() is not None]
 
 
 def instance_lut(objects: Sequence[InstanceObject]) -> LabelTable:
@@ -144,10 +153,25 @@ class Boxes3D:
 
 class InstanceRecorder:
     """Record the instance table once, then per camera tick the 3D boxes and per camera frame the
-    instance image and its 2D boxes."""
+    instance image, its 2D boxes and the people's keypoints.
 
-    def __init__(self, writer: RecordingWriter, client: int, objects: Sequence[InstanceObject]) -> None:
+    ``people``: (instance id, agent) of every person (an agent whose ``landmarks()`` is not None);
+    ``depth``: per camera id, the camera the image was rendered from and the render's depth (its
+    renderer), for the keypoints' projection and occlusion test.
+    """
+
+    def __init__(
+        self,
+        writer: RecordingWriter,
+        client: int,
+        objects: Sequence[InstanceObject],
+        *,
+        people: Sequence[tuple[int, Agent]] = (),
+        depth: Mapping[str, DepthSource] | None = None,
+    ) -> None:
         self.writer, self.objects = writer, list(objects)
+        self.people, self.depth = list(people), dict(depth or {})
+        self._landmarks: list[tuple[int, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
         self._boxes3d = Boxes3D(client)
         self._now: tuple[int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None
         self._topics: dict[str, dict[str, schema.Topic]] = {}
@@ -161,6 +185,7 @@ class InstanceRecorder:
         sizes = np.array([b[1] for b in boxes]).reshape(-1, 3)
         yaws = np.array([b[2] for b in boxes], dtype=float)
         self._now = (t, centers, sizes, yaws)
+        self._landmarks = [(i, lm) for i, agent in self.people if (lm := agent.landmarks()) is not None]
         ids = [obj.id for obj in self.objects]
         msg = M.instance_boxes_3d(self.writer.stamp_ns(t), ids, centers, sizes, yaws)
         self.writer.write(_global(schema.INSTANCE_BOXES_3D), t, msg)
@@ -184,6 +209,10 @@ class InstanceRecorder:
             self._last[cid] = (images.instances, png, boxes)
         self.writer.submit(topics["instance"], t, functools.partial(_compressed, stamp, camera.frame_id, png))
         self.writer.write(topics["boxes_2d"], t, M.instance_boxes_2d(stamp, camera, boxes))
+        if self.people and cid in self.depth:
+            view = self.depth[cid]  # (its camera is the one the image was rendered from: drift)
+            keypoints = frame_keypoints(view.camera, self._landmarks, view)
+            self.writer.write(topics["keypoints"], t, M.instance_keypoints(stamp, camera, keypoints))
 
 
 class FrameBoxes(NamedTuple):

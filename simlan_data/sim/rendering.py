@@ -153,6 +153,7 @@ class CameraRenderer:
         self._static: Layers | None = None
         self._canvas: Layers | None = None
         self._last: CameraImages | None = None
+        self._depth: np.ndarray | None = None  # the last render's canvas depth (surface_depth_m)
         self.regions_rendered = 0
         self.pixels_rendered = 0
 
@@ -221,6 +222,27 @@ class CameraRenderer:
             (int(a), int(b), int(c), int(d)) for a, b, c, d in zip(u0[keep], v0[keep], u1[keep], v1[keep])
         ]
         return merge_rects(rects, slack_px=RENDER_CALL_COST_PX)
+
+    def surface_depth_m(self, points_cam: NDArray[np.float64]) -> NDArray[np.float32]:
+        """The last render's depth (m, camera z; 0 = nothing drawn or off the canvas) along the
+        rays to camera-frame points (N, 3) in front of the camera, at the nearest canvas pixel.
+
+        The canvas is the undistorted image the output is remapped from, so this is the depth
+        the output's depth image holds at the points' distorted pixels, without remapping it
+        (the keypoints' occlusion test; it also works without the depth stream).
+        """
+        out = np.zeros(len(points_cam), dtype=np.float32)
+        if self._depth is None or len(points_cam) == 0:
+            return out
+        front = points_cam[:, 2] > 0
+        uv = np.rint(self._project(points_cam[front]))
+        height, width = self._depth.shape
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < width) & (uv[:, 1] >= 0) & (uv[:, 1] < height)
+        rows, cols = uv[inside, 1].astype(int), uv[inside, 0].astype(int)
+        depth = np.zeros(len(uv), dtype=np.float32)
+        depth[inside] = self._depth[rows, cols]
+        out[front] = depth
+        return out
 
     def _project(self, pc: np.ndarray) -> np.ndarray:
         """Canvas pixels (N, 2) of camera-frame points (N, 3) in front of the camera."""
@@ -358,6 +380,7 @@ class CameraRenderer:
 
     def _finish(self, canvas: Layers, dirty: Sequence[Rect] | None = None) -> CameraImages:
         """Distort the canvas into new output images; only ``dirty`` canvas regions if given."""
+        self._depth = canvas[1]
         last = self._last
         if dirty is None or last is None:
             out = CameraImages(*self._distort(canvas))

@@ -48,7 +48,7 @@ from simlan_data.sim.birdseye_live import BirdseyeRecorder
 from simlan_data.sim.camera_recording import CameraRecorder
 from simlan_data.sim.dynamic_layer import MovedAgents
 from simlan_data.sim.exposures import Exposed, ExposureSchedule
-from simlan_data.sim.instances import INSTANCE_STREAM, InstanceRecorder
+from simlan_data.sim.instances import INSTANCE_STREAM, InstanceRecorder, people_instances
 from simlan_data.sim.posemap_drive import PoseDriver, make_driver
 from simlan_data.sim.publishing import Publisher, camera_tf
 from simlan_data.sim.rendering import CameraImages
@@ -372,7 +372,13 @@ class Simulation:
                 run.drawn = [MovedAgents(scene.agents) for _ in scene.renderers]
         run.tracks = make_trajectory_driver(cfg, scene.agents)
         if INSTANCE_STREAM in cfg.cameras.streams:
-            run.instances = InstanceRecorder(writer, scene.client.id, scene.instances)
+            run.instances = InstanceRecorder(
+                writer,
+                scene.client.id,
+                scene.instances,
+                people=people_instances(scene.agents, scene.instances),
+                depth={c.camera_id: r for c, r in zip(scene.cameras, scene.renderers, strict=True)},
+            )
         return run
 
     def _camera_tick(self, run: _Run, step: int, t: int) -> None:
