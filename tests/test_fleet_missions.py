@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import polars as pl
@@ -27,6 +28,8 @@ from conftest import run_cli
 from simlan_data.algorithms.planner import GridPlanner
 from simlan_data.config.missions import MissionsConfig, generate_missions
 from simlan_data.config.validation import compose_config
+from simlan_data.evaluation.metrics import Visibility
+from simlan_data.geometry.calibration import load_calibration
 from simlan_data.recording import schema
 from simlan_data.sim.scene import load_inputs
 from simlan_data.world.agent_types import AGENT_TYPES
@@ -68,11 +71,14 @@ def _footprint(kind_name: str, pose: list[float]) -> shapely.Polygon:
     return shapely.affinity.affine_transform(box, [c, -s, s, c, pose[0], pose[1]])
 
 
-@pytest.mark.parametrize("robots", [4, 8, 12])
-def test_missions_are_seeded_reachable_and_apart(robots: int) -> None:
-    cfg = compose_config(["scenario=fleet", f"fleet.robots={robots}", "seed=7"])
-    again = compose_config(["scenario=fleet", f"fleet.robots={robots}", "seed=7"])
-    other = compose_config(["scenario=fleet", f"fleet.robots={robots}", "seed=8"])
+@pytest.mark.parametrize(
+    ("robots", "source"), [(4, "camera"), (8, "camera"), (12, "ground_truth"), (20, "ground_truth")]
+)
+def test_missions_are_seeded_reachable_and_apart(robots: int, source: str) -> None:
+    mission = ["scenario=fleet", f"fleet.robots={robots}", f"localization.source={source}"]
+    cfg = compose_config([*mission, "seed=7"])
+    again = compose_config([*mission, "seed=7"])
+    other = compose_config([*mission, "seed=8"])
     assert len(cfg.agents) == robots
     assert cfg.agents == again.agents  # same seed, same missions
     assert [a.pose for a in cfg.agent_list] != [a.pose for a in other.agent_list]
@@ -102,6 +108,32 @@ def test_missions_are_seeded_reachable_and_apart(robots: int) -> None:
                 if tuple(goal) != start:
                     assert planner.plan(start, (goal[0], goal[1])).length_m > 0
                 start = (goal[0], goal[1])
+
+
+def _seen_share(cfg: Any, xy: tuple[float, float]) -> float:
+    """Share of 8 headings at which some camera of the run sees a pallet truck's marker at ``xy``."""
+    cams = {
+        str(i): load_calibration(i).camera.scaled(cfg.cameras.width, cfg.cameras.height)
+        for i in cfg.cameras.ids
+    }
+    seen = Visibility(cams, AGENT_TYPES["pallet_truck"])
+    return float(
+        np.mean([seen.in_view(xy[0], xy[1], yaw) for yaw in np.linspace(-np.pi, np.pi, 8, endpoint=False)])
+    )
+
+
+def test_robots_that_steer_on_the_cameras_start_and_stop_where_the_cameras_see_them() -> None:
+    """Seed 0 once put every robot where no camera saw it: none was localized and none moved. With
+    camera steering every home and goal lies where the cameras see a marker at half the headings or
+    more; with ground-truth steering the generator uses the whole floor (some spots unseen)."""
+    cfg = compose_config(["scenario=fleet", "seed=0"])
+    spots = {tuple(a.pose[:2]) for a in cfg.agent_list} | {tuple(g) for a in cfg.agent_list for g in a.goals}
+    assert min(_seen_share(cfg, xy) for xy in spots) >= 0.5
+    free = compose_config(["scenario=fleet", "seed=0", "localization.source=ground_truth"])
+    spots = {tuple(a.pose[:2]) for a in free.agent_list} | {
+        tuple(g) for a in free.agent_list for g in a.goals
+    }
+    assert min(_seen_share(free, xy) for xy in spots) < 0.5
 
 
 def test_generator_refuses_a_floor_too_small() -> None:

@@ -7,6 +7,7 @@ are undistorted through the camera model.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -17,6 +18,7 @@ from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.transforms import Transform
 
 ARUCO_DICTIONARY = cv2.aruco.DICT_5X5_1000
+MIN_SIDE_PX = 10.0  # a marker narrower than this in an image counts as not in view
 
 
 @dataclass(frozen=True)
@@ -167,6 +169,51 @@ def marker_corners_in_marker_frame(size_m: float) -> NDArray[np.float64]:
     """(4, 3) corners in the marker frame, OpenCV order: (-s/2, s/2), (s/2, s/2), (s/2, -s/2), (-s/2, -s/2)."""
     h = size_m / 2.0
     return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+
+def markers_in_view(
+    cameras: Iterable[CameraModel],
+    marker_xyz: Sequence[float],
+    poses_xyyaw: NDArray[np.float64],
+    *,
+    size_m: float,
+) -> NDArray[np.bool_]:
+    """For base_link poses (N, 3) of a robot whose marker sits at ``marker_xyz`` (base_link, facing
+    up): is the whole marker inside some camera's image, with a valid ray at every corner and at
+    least ``MIN_SIDE_PX`` across? (One projection per camera for all poses.)"""
+    mx, my, mz = marker_xyz
+    poses = np.asarray(poses_xyyaw, dtype=float).reshape(-1, 3)
+    n = len(poses)
+    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    local = marker_corners_in_marker_frame(size_m) + [mx, my, mz]  # in base_link
+    corners = np.stack(
+        [
+            poses[:, :1] + c * local[:, 0] - s * local[:, 1],
+            poses[:, 1:2] + s * local[:, 0] + c * local[:, 1],
+            np.broadcast_to(local[:, 2], (n, 4)),
+        ],
+        axis=-1,
+    )  # (N, 4, 3)
+    visible = np.zeros(n, dtype=bool)
+    for cam in cameras:
+        if cam.position[2] <= mz or visible.all():
+            continue
+        uv, ok = cam.project(corners.reshape(-1, 3))
+        uv = uv.reshape(n, 4, 2)
+        inside = (
+            ok.reshape(n, 4).all(axis=1)
+            & (uv >= 0).all(axis=(1, 2))
+            & (uv[..., 0] <= cam.width - 1).all(axis=1)
+            & (uv[..., 1] <= cam.height - 1).all(axis=1)
+            & ~visible
+        )
+        if not inside.any():
+            continue
+        rows = np.flatnonzero(inside)
+        _, ok_px = cam.undistort_pixels(uv[rows].reshape(-1, 2))
+        side = np.linalg.norm(uv[rows] - np.roll(uv[rows], 1, axis=1), axis=2).mean(axis=1)
+        visible[rows] = ok_px.reshape(-1, 4).all(axis=1) & (side >= MIN_SIDE_PX)
+    return visible
 
 
 def _square_from_points(points_xy: list[tuple[float, float]]) -> tuple[float, float, float]:

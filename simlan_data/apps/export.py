@@ -27,6 +27,7 @@ from pathlib import Path
 
 from simlan_data.apps.cli import run_cli
 from simlan_data.apps.dataset_formats import CocoWriter, YoloWriter
+from simlan_data.apps.export_shards import export_shards, sweep_runs
 from simlan_data.apps.tracking_formats import BOXES, AiCityWriter, MotWriter
 from simlan_data.apps.trajectory_export import FILE_NAME as TRAJECTORY_FILE
 from simlan_data.apps.trajectory_export import export_trajectory
@@ -68,6 +69,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _without(argv: list[str], *flags: str) -> list[str]:
+    """``argv`` without ``flags`` and their values (``--flag VALUE`` or ``--flag=VALUE``)."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a in flags:
+            skip = True
+        elif not any(a.startswith(f + "=") for f in flags):
+            out.append(a)
+    return out
+
+
 def _check_out(out: Path) -> None:
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ConfigError(
@@ -80,6 +94,10 @@ def _check_out(out: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    runs = sweep_runs(Path(args.run))
+    if runs is not None:  # a sweep: one shard per run (apps/export_shards.py)
+        options = [a for a in (sys.argv[1:] if argv is None else argv) if a not in (args.run,)]
+        return export_shards(runs, args.out, args.format, _without(options, "--format", "--out"), main)
     if args.format in POSE_FORMATS:
         _check_out(args.out)
         entries = export_trajectory(args.run, args.out, rate_hz=args.rate_hz)

@@ -14,6 +14,11 @@ charge (every ``charge_every``-th task) goes to one of the chargers, then back h
 tasks a robot returns home, so no robot ends on a shared spot. The fleet metrics count goals
 ``2k, 2k+1`` as task ``k`` and a last unpaired goal as the return home.
 
+People (``fleet.people``, the dataset scenarios): each a humanoid that walks a loop, from its home
+through ``PERSON_STOPS`` other spots and back, for the whole run, along collision-free paths the
+grid planner finds on the layout (walkers follow straight lines between their waypoints, so the
+waypoints are the path's corners). People have no tasks: the fleet metrics count robots only.
+
 Reachable means: every spot lies in the largest connected region of floor whose clearance to the
 layout's obstacles is at least the largest footprint's circumscribed radius in the mix plus
 ``MARGIN_M`` (so a robot can turn in place on it, and the planner, which keeps half a width plus
@@ -23,6 +28,7 @@ layout's obstacles is at least the largest footprint's circumscribed radius in t
 from __future__ import annotations
 
 import functools
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -32,9 +38,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.algorithms.markers import markers_in_view
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
-from simlan_data.errors import ConfigError
-from simlan_data.world.agent_types import AGENT_TYPES, AgentType
+from simlan_data.algorithms.planner import GridPlanner, PlanningError
+from simlan_data.errors import CalibrationError, ConfigError
+from simlan_data.geometry.calibration import load_calibration
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.world.agent_types import AGENT_TYPES, MARKER_SIZE_M, AgentType
 from simlan_data.world.layout import load_layout
 
 __all__ = ["GOALS_PER_TASK", "Missions", "MissionsConfig", "generate_missions", "resolve"]
@@ -44,6 +54,9 @@ MARGIN_M = 0.15  # spots keep the circumscribed radius plus this from obstacles
 RACK_BAND_M = 0.8  # pickups lie within this of the closest spot to a rack
 SPACING_M = 0.5  # free floor between two homes' (or a home's and a dock's) circumscribed circles
 MAX_ROBOTS = 200
+MAX_PEOPLE = 50
+PERSON_STOPS = 3  # a person walks from home through this many spots and back, again and again
+PERSON = "humanoid"
 ROBOT_TYPES = tuple(name for name, t in AGENT_TYPES.items() if t.drive == "diff")
 _bad = ConfigError.invalid
 
@@ -61,11 +74,21 @@ class MissionsConfig:
     chargers: int = 1  # shared charging spots
     charge_every: int = 3  # every n-th task of a robot is a charge (0: never)
     speed_mps: float = 1.0  # every robot's speed
+    people: int = 0  # people (humanoids) walking loops between spots on the floor (0: none)
+    people_speed_mps: float = 1.2  # their walking speed
     area_m: list[float] = field(
         default_factory=lambda: [-8.0, 34.0, -10.0, 10.0]
     )  # x0, x1, y0, y1: all spots
 
     def __post_init__(self) -> None:
+        if not 0 <= self.people <= MAX_PEOPLE:
+            raise _bad(
+                "fleet.people", self.people, f"must be within 0..{MAX_PEOPLE}", "use e.g. fleet.people=2"
+            )
+        if not 0 < self.people_speed_mps <= 2.0:
+            raise _bad(
+                "fleet.people_speed_mps", self.people_speed_mps, "must be within (0, 2] m/s", "use 1.2"
+            )
         if not 0 <= self.robots <= MAX_ROBOTS:
             raise _bad(
                 "fleet.robots",
@@ -176,8 +199,13 @@ def generate_missions(
     fidelity: str = "default",
     resolution_m: float = 0.1,
     clearance_m: float = 0.4,
+    cameras: tuple[CameraModel, ...] = (),
 ) -> Missions:
     """The fleet's agents (type, home pose, goals, speed) from ``spec`` and ``seed``, deterministically.
+
+    With ``cameras`` (robots that steer on the cameras' estimates), every spot is one where each
+    robot type of the mix is seen by a camera, whatever its heading (``_seen``): a robot that
+    starts or stops where no camera sees its marker is never localized and never moves.
 
     Raises:
         ConfigError: no robots, or the area's floor cannot hold the robots, docks and chargers apart.
@@ -193,6 +221,9 @@ def generate_missions(
     widest = max(k.radius_m for k in kinds)
     planner_m = max(k.half_width_m for k in kinds) + clearance_m
     grid, clearance = _floor(layout, fidelity, resolution_m)
+    if cameras:
+        seen = _seen(grid, clearance >= max(widest + MARGIN_M, planner_m), cameras, kinds, spec.area_m)
+        clearance = np.where(seen, clearance, 0.0).astype(np.float32)
     spots = _spots(grid, clearance, max(widest + MARGIN_M, planner_m), spec.area_m)
     rng = np.random.default_rng([seed, 23])  # (23: the issue; any constant keeps seeds independent)
     taken: list[tuple[float, float, float]] = []
@@ -204,8 +235,14 @@ def generate_missions(
             "fleet.robots",
             spec.robots,
             f"the free floor of fleet.area_m={list(spec.area_m)} holds only {len(homes)} of these robots apart"
-            f" beside {spec.docks} docks and {spec.chargers} chargers",
-            "use fewer robots (or smaller types, or a larger fleet.area_m)",
+            f" beside {spec.docks} docks and {spec.chargers} chargers"
+            + (
+                " where the cameras see them (robots steer on the cameras: localization.source=camera)"
+                if cameras
+                else ""
+            ),
+            "use fewer robots (or smaller types, or a larger fleet.area_m"
+            + (", or more cameras)" if cameras else ")"),
         )
     docks, chargers = stations[: spec.docks], stations[spec.docks :]
     near_rack = spots[spots[:, 2] <= spots[:, 2].min() + RACK_BAND_M]
@@ -239,21 +276,180 @@ def generate_missions(
             "goals": goals,
             "speed_mps": float(spec.speed_mps),
         }
+    walks = _walks(spec, grid, clearance, seed=seed, area=spec.area_m, taken=taken)
+    for k, (home, goals) in enumerate(walks):
+        agents[f"robot_agent_{spec.robots + k + 1}"] = {
+            "type": PERSON,
+            "pose": [home[0], home[1], _heading(home, goals[0])],
+            "goals": goals,
+            "speed_mps": float(spec.people_speed_mps),
+            "loop": True,
+        }
     return Missions(agents, [list(d) for d in docks], [list(c) for c in chargers])
+
+
+SEEN_STEP_CELLS = 2  # the cameras' view is tested on every 2nd cell (0.2 m at the default resolution)
+SEEN_YAWS = 8  # headings tested per cell
+SEEN_SHARE = 0.5  # seen at this share of them at least (at every heading, 12 robots did not fit: 8)
+
+
+def _seen(
+    grid: OccupancyGrid,
+    free: NDArray[np.bool_],
+    cameras: tuple[CameraModel, ...],
+    kinds: list[AgentType],
+    area: list[float],
+) -> NDArray[np.bool_]:
+    """Cells where every type in ``kinds`` with a marker has it seen by a camera at ``SEEN_SHARE``
+    of the headings at least (``markers_in_view``; a marker sits up to 0.8 m off the robot's
+    centre), tested on the ``free`` cells of a coarser grid in ``area`` and spread to their
+    neighbours."""
+    rows, cols = grid.occupied.shape
+    coarse = np.argwhere(free[::SEEN_STEP_CELLS, ::SEEN_STEP_CELLS]) * SEEN_STEP_CELLS
+    xy = grid.to_xy(coarse)
+    keep = (xy[:, 0] >= area[0]) & (xy[:, 0] <= area[1]) & (xy[:, 1] >= area[2]) & (xy[:, 1] <= area[3])
+    coarse, xy = coarse[keep], xy[keep]
+    ok = np.ones(len(xy), dtype=bool)
+    yaws = np.linspace(-math.pi, math.pi, SEEN_YAWS, endpoint=False)
+    for marker in sorted({k.marker_xyz for k in kinds if k.marker_xyz is not None}):
+        count = np.zeros(len(xy), dtype=int)
+        for yaw in yaws:
+            poses = np.column_stack([xy, np.full(len(xy), yaw)])
+            count += markers_in_view(cameras, marker, poses, size_m=MARKER_SIZE_M)
+        ok &= count >= SEEN_SHARE * SEEN_YAWS
+    seen = np.zeros((rows, cols), dtype=bool)
+    for dr in range(SEEN_STEP_CELLS):
+        for dc in range(SEEN_STEP_CELLS):
+            r, c = coarse[ok, 0] + dr, coarse[ok, 1] + dc
+            inside = (r < rows) & (c < cols)
+            seen[r[inside], c[inside]] = True
+    return seen
+
+
+def _walkable(
+    grid: OccupancyGrid, clearance: NDArray[np.float32], need_m: float, area: list[float]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """People's spots: (N, 3) x, y, clearance of the largest connected region of floor with
+    ``need_m`` clearance inside ``area`` (their paths stay in the area: under the cameras), and
+    the cells outside the area."""
+    rows, cols = np.indices(clearance.shape)
+    xy = grid.to_xy(np.column_stack([rows.ravel(), cols.ravel()])).reshape(*clearance.shape, 2)
+    outside = (
+        (xy[..., 0] < area[0]) | (xy[..., 0] > area[1]) | (xy[..., 1] < area[2]) | (xy[..., 1] > area[3])
+    )
+    count, labels = cv2.connectedComponents(
+        ((clearance >= need_m) & ~outside).astype(np.uint8), connectivity=8
+    )
+    if count < 2:
+        return np.zeros((0, 3)), outside
+    largest = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1
+    cells = np.argwhere(labels == largest)
+    return np.column_stack([grid.to_xy(cells), clearance[cells[:, 0], cells[:, 1]]]), outside
+
+
+def _heading(a: tuple[float, float], b: list[float]) -> float:
+    return round(math.atan2(b[1] - a[1], b[0] - a[0]), 4)
+
+
+def _walks(
+    spec: MissionsConfig,
+    grid: OccupancyGrid,
+    clearance: NDArray[np.float32],
+    *,
+    seed: int,
+    area: list[float],
+    taken: list[tuple[float, float, float]],
+) -> list[tuple[tuple[float, float], list[list[float]]]]:
+    """Each person's home and the corners of its loop (home -> PERSON_STOPS spots -> home), planned
+    on the grid with the person's radius plus ``MARGIN_M``; homes clear of ``taken`` (robots, docks)."""
+    if not spec.people:
+        return []
+    person = AGENT_TYPES[PERSON]
+    need = person.radius_m + MARGIN_M
+    spots, outside = _walkable(grid, clearance, need, area)
+    rng = np.random.default_rng([seed, 25])  # (25: the dataset issue; robots' draws stay as they were)
+    homes = _pick_apart(rng, spots, [person.radius_m + SPACING_M / 2] * spec.people, taken)
+    if len(homes) < spec.people:
+        raise _bad(
+            "fleet.people",
+            spec.people,
+            f"the free floor of fleet.area_m={list(area)} holds only {len(homes)} people apart beside the robots",
+            "use fewer people or a larger fleet.area_m",
+        )
+    planner = GridPlanner(grid, radius_m=need)
+    out = []
+    for home in homes:
+        stops = [tuple(spots[int(i), :2]) for i in rng.integers(len(spots), size=PERSON_STOPS)]
+        corners: list[list[float]] = []
+        here = home
+        for there in [*stops, home]:
+            try:
+                path = planner.plan(here, there, blocked=outside).points_xy  # in the area
+            except PlanningError:  # no way inside the area: the next stop
+                continue
+            corners += [[round(float(x), 2), round(float(y), 2)] for x, y in path[1:]]
+            here = (float(path[-1, 0]), float(path[-1, 1]))
+        out.append((home, corners or [list(home)]))
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _generated(
+    section: str,
+    seed: int,
+    layout: str,
+    fidelity: str,
+    resolution_m: float,
+    clearance_m: float,
+    view: tuple[tuple[int, ...], str, int, int] | None,
+) -> Missions:
+    """``generate_missions`` of a JSON ``fleet`` section, in the view of the cameras ``view`` (ids,
+    calibration directory, width, height) when robots steer on them (cached: the resolver runs
+    several times a run, and the view and people's paths take a while)."""
+    return generate_missions(
+        MissionsConfig(**json.loads(section)),
+        seed=seed,
+        layout=layout,
+        fidelity=fidelity,
+        resolution_m=resolution_m,
+        clearance_m=clearance_m,
+        cameras=() if view is None else _cameras(*view),
+    )
+
+
+def _cameras(ids: tuple[int, ...], directory: str, width: int, height: int) -> tuple[CameraModel, ...]:
+    """The run's cameras at its resolution; none where a calibration does not load (the scene
+    refuses such a camera with its own message, before anything runs)."""
+    try:
+        return tuple(load_calibration(i, directory or None).camera.scaled(width, height) for i in ids)
+    except (CalibrationError, ConfigError, OSError):
+        return ()
 
 
 def resolve(key: str, root: Mapping[Any, Any]) -> Any:
     """Value of ``${fleet_missions:KEY}`` (``agents``, ``docks``, ``chargers``) for a whole config."""
     section = dict(root.get("fleet") or {})
-    spec = MissionsConfig(**section)
     world, nav = root.get("world") or {}, root.get("navigation") or {}
-    missions = generate_missions(
-        spec,
-        seed=int(root.get("seed", 0)),
-        layout=str(world.get("layout", "warehouse_layout.csv")),
-        fidelity=str(world.get("fidelity", "default")),
-        resolution_m=float(nav.get("resolution_m", 0.1)),
-        clearance_m=float(nav.get("clearance_m", 0.4)),
+    cams = root.get("cameras") or {}
+    steer_on_cameras = (root.get("localization") or {}).get("source", "camera") == "camera"
+    view = (
+        (
+            tuple(cams.get("ids") or ()),
+            str(cams.get("calibration_dir") or ""),
+            int(cams.get("width", 960)),
+            int(cams.get("height", 540)),
+        )
+        if steer_on_cameras
+        else None
+    )
+    missions = _generated(
+        json.dumps(section, sort_keys=True, default=list),
+        int(root.get("seed", 0)),
+        str(world.get("layout", "warehouse_layout.csv")),
+        str(world.get("fidelity", "default")),
+        float(nav.get("resolution_m", 0.1)),
+        float(nav.get("clearance_m", 0.4)),
+        view,
     )
     values = {"agents": missions.agents, "docks": missions.docks, "chargers": missions.chargers}
     if key not in values:

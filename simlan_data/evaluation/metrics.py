@@ -10,7 +10,7 @@ Localization (per agent and overall, at control ticks):
 - ``yaw_rmse_deg``;
 - ``availability``: share of control ticks with a fresh estimate (``observed``) among the ticks
   at which the marker is in at least one camera's view (from ground truth: all four corners on
-  valid pixels inside the image, facing the camera, at least ``MIN_SIDE_PX`` wide);
+  valid pixels inside the image, facing the camera, at least ``MIN_SIDE_PX`` wide: ``algorithms.markers.markers_in_view``);
 - ``latency_s``: mean age of the newest fix (image capture to the tick that uses it).
 
 Navigation (per agent ``navigation.<ns>.*`` and summed ``navigation.*``): ``goals_reached``,
@@ -32,7 +32,7 @@ import numpy as np
 import polars as pl
 from numpy.typing import NDArray
 
-from simlan_data.algorithms.markers import marker_corners_in_marker_frame
+from simlan_data.algorithms.markers import markers_in_view
 from simlan_data.algorithms.navigation import FAILURE_REASONS, failure_reason
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.fleet_metrics import Status, fleet_metrics
@@ -41,8 +41,6 @@ from simlan_data.geometry.rotations import wrap_angle
 from simlan_data.recording import schema
 from simlan_data.recording.reader import Message, RecordingReader
 from simlan_data.world.agent_types import MARKER_SIZE_M, AgentType
-
-MIN_SIDE_PX = 10.0
 
 POSE_SCHEMA = {"stamp_ns": pl.Int64, "x": pl.Float64, "y": pl.Float64, "yaw": pl.Float64}
 
@@ -205,43 +203,9 @@ class Visibility:
         return bool(self.in_view_many(np.array([[x, y, yaw]]))[0])
 
     def in_view_many(self, poses_xyyaw: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """For base_link poses (N, 3): is the whole marker inside some camera's image, with a
-        valid ray at every corner and at least MIN_SIDE_PX across? (One projection per camera
-        for all poses.)"""
+        """For base_link poses (N, 3): is the whole marker seen by some camera (``markers_in_view``)?"""
         assert self.kind.marker_xyz is not None
-        mx, my, mz = self.kind.marker_xyz
-        poses = np.asarray(poses_xyyaw, dtype=float).reshape(-1, 3)
-        n = len(poses)
-        c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-        local = marker_corners_in_marker_frame(MARKER_SIZE_M) + [mx, my, mz]  # in base_link
-        corners = np.stack(
-            [
-                poses[:, :1] + c * local[:, 0] - s * local[:, 1],
-                poses[:, 1:2] + s * local[:, 0] + c * local[:, 1],
-                np.broadcast_to(local[:, 2], (n, 4)),
-            ],
-            axis=-1,
-        )  # (N, 4, 3)
-        visible = np.zeros(n, dtype=bool)
-        for cam in self.cameras.values():
-            if cam.position[2] <= mz or visible.all():
-                continue
-            uv, ok = cam.project(corners.reshape(-1, 3))
-            uv = uv.reshape(n, 4, 2)
-            inside = (
-                ok.reshape(n, 4).all(axis=1)
-                & (uv >= 0).all(axis=(1, 2))
-                & (uv[..., 0] <= cam.width - 1).all(axis=1)
-                & (uv[..., 1] <= cam.height - 1).all(axis=1)
-                & ~visible
-            )
-            if not inside.any():
-                continue
-            rows = np.flatnonzero(inside)
-            _, ok_px = cam.undistort_pixels(uv[rows].reshape(-1, 2))
-            side = np.linalg.norm(uv[rows] - np.roll(uv[rows], 1, axis=1), axis=2).mean(axis=1)
-            visible[rows] = ok_px.reshape(-1, 4).all(axis=1) & (side >= MIN_SIDE_PX)
-        return visible
+        return markers_in_view(self.cameras.values(), self.kind.marker_xyz, poses_xyyaw, size_m=MARKER_SIZE_M)
 
 
 def localization_metrics(
