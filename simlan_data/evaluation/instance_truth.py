@@ -71,6 +71,7 @@ class AnnotatedFrame:
     keypoints: NDArray[np.float32] = field(
         default_factory=lambda: np.zeros((0, NUM_LANDMARKS, 3), dtype=np.float32)
     )
+    log_ns: int = -1  # the frame's log time (the recording's clock, which other topics share)
 
     @property
     def stem(self) -> str:
@@ -202,6 +203,7 @@ def frames(
             world_ids=world[0],
             world_centers=world[1],
             **_keypoints(parts.get("keypoints")),
+            log_ns=m.stamp_ns,
         )
 
 
