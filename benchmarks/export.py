@@ -10,6 +10,12 @@ pairs: load drifts, so each pair runs close in time); frames per second = camera
 exported to COCO, YOLO, MOTChallenge and AI City (``python -m simlan_data.export``, process wall
 time). History:
 docs/benchmarks/datasets.md.
+
+    python benchmarks/export.py --only lerobot --json benchmarks/results/export_DATE_lerobot.json [--cameras 11] [--duration 20]
+
+measures the LeRobot export alone: one run with ``cameras.streams=[rgb]`` (the export needs no
+instance stream), exported ``--repeat`` times; camera frames (ticks x cameras, each one decoded
+and AV1-encoded) per second of the export process's wall time, and its peak memory (ru_maxrss).
 """
 
 from __future__ import annotations
@@ -17,13 +23,16 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import os
 import shutil
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-from common import machine, run_cli
+from common import REPO, machine, run_cli
 
 OFF, ON = "[rgb,semantic]", "[rgb,semantic,instance]"
 INSTANCE_SUFFIXES = ("/instances/image_raw/compressed", "/instances/boxes")
@@ -68,15 +77,76 @@ def export_speed(run_dir: Path, fmt: str, out: Path) -> float:
     return wall
 
 
+def lerobot_speed(run_dir: Path, out: Path) -> tuple[float, int, float]:
+    """(wall s, frames exported, peak MiB) of one ``--format lerobot`` export process (its own
+    maximum resident set, from wait4)."""
+    cmd = [sys.executable, "-m", "simlan_data.export", str(run_dir), "--format", "lerobot", "--out", str(out)]
+    t0 = time.perf_counter()
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode != 0:
+            err.seek(0)
+            raise SystemExit(f"export lerobot failed: {err.read().decode().strip()}")
+    frames = json.loads((out / "meta" / "info.json").read_text())["total_frames"]
+    return wall, frames, usage.ru_maxrss / 1024
+
+
+def lerobot_only(args: argparse.Namespace, root: Path) -> dict:
+    """The LeRobot export's figure: one rgb run, ``--repeat`` exports, the median."""
+    recorded = run(root, "rgb", "[rgb]", args.cameras, args.duration)
+    walls, peaks, frames = [], [], 0
+    for i in range(max(args.repeat, 1)):
+        wall, frames, peak = lerobot_speed(Path(str(recorded["dir"])), root / f"lerobot{i}")
+        walls.append(wall)
+        peaks.append(peak)
+    wall = statistics.median(walls)
+    camera_frames = frames * args.cameras
+    setup = f"default scenario, {args.cameras} cameras 960x540 at 5 Hz, {args.duration:g} s, rgb"
+    return {
+        "command": f"python benchmarks/export.py --only lerobot --cameras {args.cameras} --duration {args.duration:g} --repeat {args.repeat} --json FILE",
+        "machine": machine(),
+        "date": datetime.date.today().isoformat(),
+        "history": "docs/benchmarks/datasets.md",
+        "setup": setup,
+        "run": recorded,
+        "export": {
+            "lerobot": {
+                "wall_s": [round(w, 2) for w in walls],
+                "frames": frames,
+                "peak_mib": [round(p) for p in peaks],
+            }
+        },
+        "figures": [
+            {
+                "id": "dataset_lerobot_export_fps",
+                "figure": f"LeRobot export speed (every camera frame decoded and AV1-encoded by SVT-AV1, LeRobot's settings; {setup})",
+                "value": round(camera_frames / wall, 1),
+                "unit": "frames/s",
+                "note": f"{frames} LeRobot frames x {args.cameras} videos; median of {len(walls)}, whole process incl. start-up; peak memory {max(peaks):.0f} MiB",
+                "history": "docs/benchmarks/datasets.md",
+            }
+        ],
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--json", type=Path, required=True)
     parser.add_argument("--cameras", type=int, default=11)
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--only", choices=["lerobot"], help="measure this export alone (its own figure)")
     args = parser.parse_args()
     root = Path(tempfile.mkdtemp(prefix="bench_export_"))
     try:
+        if args.only == "lerobot":
+            result = lerobot_only(args, root)
+            args.json.write_text(json.dumps(result, indent=1) + "\n")
+            print(json.dumps(result["export"]))
+            return
         runs: dict[str, list[dict[str, float]]] = {"off": [], "on": []}
         for i in range(args.repeat):
             for key, streams in (("off", OFF), ("on", ON)):

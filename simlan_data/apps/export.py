@@ -8,6 +8,9 @@ instance ground truth as a dataset (issue 25).
     python -m simlan_data.export RUN --format trajectory --out DIR [--rate-hz 1]
                                                                DIR/trajectory.json (SIMLAN's tracker
                                                                format, any run: apps/trajectory_export.py)
+    python -m simlan_data.export RUN --format lerobot --out DIR [--agent NS] [--task TEXT]
+                                                               a LeRobot v3.0 dataset of one agent, cameras
+                                                               as videos (any run: apps/lerobot_export.py)
 
 RUN is a run directory, its recording, or the recording's metadata.yaml; the run must have been
 recorded with ``cameras.streams=[...,instance]`` and JPEG or PNG colour images. Data flow::
@@ -28,6 +31,7 @@ from pathlib import Path
 from simlan_data.apps.cli import run_cli
 from simlan_data.apps.dataset_formats import CocoWriter, YoloWriter
 from simlan_data.apps.export_shards import export_shards, sweep_runs
+from simlan_data.apps.lerobot_export import export_lerobot
 from simlan_data.apps.tracking_formats import BOXES, AiCityWriter, MotWriter
 from simlan_data.apps.trajectory_export import FILE_NAME as TRAJECTORY_FILE
 from simlan_data.apps.trajectory_export import export_trajectory
@@ -43,17 +47,21 @@ WRITERS: dict[str, type[CocoWriter | YoloWriter | MotWriter | AiCityWriter]] = {
 }
 BOXED = ("mot", "aicity")  # the formats that take --box
 POSE_FORMATS = ("trajectory",)  # ground-truth poses (any run), not instance images
+ROBOT_FORMATS = ("lerobot",)  # an agent's images, states and commands (any run)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m simlan_data.export",
         description="Export a recording's instance ground truth (stream instance) as a COCO, YOLO, "
-        "MOTChallenge or AI City dataset.",
+        "MOTChallenge or AI City dataset, its ground-truth poses as a tracker trajectory, or an agent's "
+        "cameras, states and commands as a LeRobot dataset.",
     )
     parser.add_argument("run", help="run directory, recording directory, or its metadata.yaml")
     parser.add_argument(
-        "--format", required=True, help=f"dataset format: {' | '.join([*WRITERS, *POSE_FORMATS])}"
+        "--format",
+        required=True,
+        help=f"dataset format: {' | '.join([*WRITERS, *POSE_FORMATS, *ROBOT_FORMATS])}",
     )
     parser.add_argument("--out", type=Path, required=True, help="new or empty output directory")
     parser.add_argument(
@@ -64,6 +72,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--rate-hz", type=float, default=1.0, help="trajectory: entries per simulated second (default 1)"
+    )
+    parser.add_argument(
+        "--agent", help="lerobot: the agent whose state and commands are written (default: the first)"
+    )
+    parser.add_argument(
+        "--task", help="lerobot: the episode's task string (default: drive AGENT to its goals)"
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
     return parser
@@ -103,8 +117,18 @@ def main(argv: list[str] | None = None) -> int:
         entries = export_trajectory(args.run, args.out, rate_hz=args.rate_hz)
         print(f"exported {entries} stamps ({args.format}) -> {args.out / TRAJECTORY_FILE}")
         return 0
+    if args.format in ROBOT_FORMATS:
+        _check_out(args.out)
+        done = export_lerobot(args.run, args.out, agent=args.agent, task=args.task)
+        left = (
+            f", {done.incomplete_ticks} ticks without every camera left out" if done.incomplete_ticks else ""
+        )
+        print(
+            f"exported {done.frames} frames at {done.fps} fps of {done.agent} ({args.format}{left}) -> {args.out}"
+        )
+        return 0
     if args.format not in WRITERS:
-        known = [*WRITERS, *POSE_FORMATS]
+        known = [*WRITERS, *POSE_FORMATS, *ROBOT_FORMATS]
         raise ConfigError(
             f"invalid --format {args.format!r}",
             "export arguments",
