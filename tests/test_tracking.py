@@ -153,6 +153,8 @@ def test_bad_tracks_one_line_exit_2_nothing_written(made: Path, tmp_path: Path) 
     twice = {c: [list(r) for r in rs] for c, rs in rows.items()}
     twice["160"].append(list(twice["160"][0]))
     few = {"160": rows["160"]}
+    fraction = {c: [list(r) for r in rs] for c, rs in rows.items()}
+    fraction["161"][0][1] = "1.5"
     aicity = tmp_path / "aicity.txt"
     aicity.write_text("163 1 0 1 1 5 5 0.0 0.0\n")
     cases = {
@@ -160,8 +162,15 @@ def test_bad_tracks_one_line_exit_2_nothing_written(made: Path, tmp_path: Path) 
         "letters": ("width='wide'", "not a finite number", "fix the row"),
         "twice": ("duplicate tracker id", "sequence camera_160", "its own id"),
         "few": ("missing tracks file", "camera_161.txt", "write an empty file"),
+        "fraction": ("invalid id=1.5", "camera_161.txt line 1", "whole-number ids"),
     }
-    for name, tracks in (("late", late), ("letters", letters), ("twice", twice), ("few", few)):
+    for name, tracks in (
+        ("late", late),
+        ("letters", letters),
+        ("twice", twice),
+        ("few", few),
+        ("fraction", fraction),
+    ):
         folder = _tracker(tmp_path / "t", name, tracks)
         out = tmp_path / f"out_{name}"
         proc = run_cli(

@@ -123,6 +123,12 @@ def _frame(value: float, first: int, count: int, name: str, where: str) -> int:
     return int(value) - first
 
 
+def _track_id(value: float, name: str, where: str) -> int:
+    if value != int(value):
+        raise _bad(where, f"invalid {name}={value:g}", "a track id is an integer", "give whole-number ids")
+    return int(value)
+
+
 def _lines(path: Path) -> list[tuple[str, str]]:
     """(where, text) of a file's non-empty lines."""
     try:
@@ -170,7 +176,8 @@ def read_mot(path: Path, truth: Truth) -> Tracks:
             frame, track, *box = _numbers(
                 line.split(","), where, ("frame", "id", "left", "top", "width", "height")
             )
-            rows[_frame(frame, 1, count, "frame", where)].append((int(track), box))
+            index = _frame(frame, 1, count, "frame", where)
+            rows[index].append((_track_id(track, "id", where), box))
         tracks.cameras[cid] = _collect(rows)
     return tracks
 
@@ -195,8 +202,9 @@ def read_aicity(path: Path, truth: Truth) -> Tracks:
             )
         _, track, frame, *rest = _numbers(["0", *parts[1:]], where, AICITY_FIELDS)
         index = _frame(frame, 0, len(truth.cameras[cid].stamps), "frame_id", where)
-        boxes[cid][index].append((int(track), rest[:4]))
-        world[truth.cameras[cid].stamps[index]][int(track)].append((rest[4], rest[5]))
+        obj = _track_id(track, "obj_id", where)
+        boxes[cid][index].append((obj, rest[:4]))
+        world[truth.cameras[cid].stamps[index]][obj].append((rest[4], rest[5]))
     tracks = Tracks({cid: _collect(rows) for cid, rows in boxes.items()}, {})
     assert tracks.world is not None
     for stamp, objects in world.items():
