@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -187,3 +188,9 @@ def test_bad_tracks_one_line_exit_2_nothing_written(made: Path, tmp_path: Path) 
     )  # fmt: skip
     assert proc.returncode == 2 and "invalid camera_id='163'" in proc.stderr and "line 1" in proc.stderr
     assert not (tmp_path / "out_ai").exists()
+
+
+def test_without_trackeval_the_metrics_name_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "trackeval", None)  # (as if not installed: the import fails)
+    with pytest.raises(ConfigError, match=r'TrackEval is not installed.*pip install -e "\.\[tracking\]"'):
+        evaluate({"world": []})
