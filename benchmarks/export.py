@@ -1,9 +1,10 @@
 """Instance ground truth and dataset export (issue 25): what annotation costs a run, how fast the
 exports go, and how many bytes an annotated frame takes.
 
-    python benchmarks/export.py --json benchmarks/results/export_DATE.json [--cameras 11] [--duration 10] [--repeat 2]
+    python benchmarks/export.py --json benchmarks/results/export_DATE.json [--cameras 11] [--duration 10] [--repeat 2] [--scenario S]
 
-The same run (default scenario, seed 1, the first ``--cameras`` GPSS cameras at 960x540 and 5 Hz)
+The same run (``--scenario``, default ``default``; ``humanoid_crossing`` has a person, so its
+instance stream records keypoints too; seed 1, the first ``--cameras`` GPSS cameras at 960x540 and 5 Hz)
 with ``cameras.streams=[rgb,semantic]`` and ``[rgb,semantic,instance]``, alternately (``--repeat``
 pairs: load drifts, so each pair runs close in time); frames per second = camera frames recorded
 / the run's simulation wall time (``sim.wall_s``: start-up left out). Then the instance run is
@@ -35,13 +36,17 @@ from pathlib import Path
 from common import REPO, machine, run_cli
 
 OFF, ON = "[rgb,semantic]", "[rgb,semantic,instance]"
-INSTANCE_SUFFIXES = ("/instances/image_raw/compressed", "/instances/boxes")
+INSTANCE_SUFFIXES = ("/instances/image_raw/compressed", "/instances/boxes", "/instances/keypoints")
+KEYPOINT_SUFFIX = "/instances/keypoints"  # (scenes with people: --scenario humanoid_crossing)
 INSTANCE_GLOBALS = ("/ground_truth/instances", "/ground_truth/boxes")
 
 
-def run(root: Path, name: str, streams: str, cameras: int, duration_s: float) -> dict[str, float]:
+def run(
+    root: Path, name: str, streams: str, cameras: int, duration_s: float, scenario: str = "default"
+) -> dict[str, float]:
     out = root / name
     proc = run_cli(
+        f"scenario={scenario}",
         f"duration_s={duration_s:g}",
         "progress=false",
         "seed=1",
@@ -55,17 +60,18 @@ def run(root: Path, name: str, streams: str, cameras: int, duration_s: float) ->
     return {"frames": metrics["sim.camera_frames"], "wall_s": metrics["sim.wall_s"], "dir": str(out)}
 
 
-def instance_bytes(recording: Path) -> tuple[int, int]:
-    """(bytes of the instance topics' messages, annotated frames) of a recording."""
+def instance_bytes(recording: Path) -> tuple[int, int, int]:
+    """(bytes of the instance topics' messages, of which keypoints, annotated frames) of a recording."""
     from simlan_data.recording.reader import RecordingReader
 
-    total = frames = 0
+    total = keypoints = frames = 0
     with RecordingReader(recording) as reader:
         topics = [t for t in reader.topics if t.endswith(INSTANCE_SUFFIXES) or t in INSTANCE_GLOBALS]
         for m in reader.messages(topics, raw=True):
             total += len(m.msg)
+            keypoints += len(m.msg) if m.topic.endswith(KEYPOINT_SUFFIX) else 0
             frames += int(m.topic.endswith("/instances/boxes"))
-    return total, frames
+    return total, keypoints, frames
 
 
 def export_speed(run_dir: Path, fmt: str, out: Path) -> float:
@@ -138,6 +144,9 @@ def main() -> None:
     parser.add_argument("--cameras", type=int, default=11)
     parser.add_argument("--duration", type=float, default=10.0)
     parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument(
+        "--scenario", default="default", help="scenario of the runs (humanoid_crossing: with keypoints)"
+    )
     parser.add_argument("--only", choices=["lerobot"], help="measure this export alone (its own figure)")
     args = parser.parse_args()
     root = Path(tempfile.mkdtemp(prefix="bench_export_"))
@@ -150,18 +159,19 @@ def main() -> None:
         runs: dict[str, list[dict[str, float]]] = {"off": [], "on": []}
         for i in range(args.repeat):
             for key, streams in (("off", OFF), ("on", ON)):
-                runs[key].append(run(root, f"{key}{i}", streams, args.cameras, args.duration))
+                runs[key].append(run(root, f"{key}{i}", streams, args.cameras, args.duration, args.scenario))
         fps = {k: statistics.median(r["frames"] / r["wall_s"] for r in v) for k, v in runs.items()}
         last_on = Path(str(runs["on"][-1]["dir"]))
-        size, annotated = instance_bytes(last_on / "recording")
+        size, keypoint_size, annotated = instance_bytes(last_on / "recording")
         export = {}
         for fmt in ("coco", "yolo", "mot", "aicity"):
             wall = export_speed(last_on, fmt, root / f"export_{fmt}")
             export[fmt] = {"wall_s": round(wall, 2), "frames_per_s": round(annotated / wall, 1)}
         cost = 1 - fps["on"] / fps["off"]
-        setup = f"default scenario, {args.cameras} cameras 960x540 at 5 Hz, {args.duration:g} s, rgb+semantic"
+        setup = f"{args.scenario} scenario, {args.cameras} cameras 960x540 at 5 Hz, {args.duration:g} s, rgb+semantic"
+        scenario_arg = "" if args.scenario == "default" else f" --scenario {args.scenario}"
         result = {
-            "command": f"python benchmarks/export.py --cameras {args.cameras} --duration {args.duration:g} --repeat {args.repeat} --json FILE",
+            "command": f"python benchmarks/export.py{scenario_arg} --cameras {args.cameras} --duration {args.duration:g} --repeat {args.repeat} --json FILE",
             "machine": machine(),
             "date": datetime.date.today().isoformat(),
             "history": "docs/benchmarks/datasets.md",
@@ -169,6 +179,7 @@ def main() -> None:
             "runs": runs,
             "frames_per_s": fps,
             "instance_bytes": size,
+            "keypoint_bytes": keypoint_size,
             "annotated_frames": annotated,
             "export": export,
             "figures": [
@@ -206,12 +217,30 @@ def main() -> None:
                 },
             ],
         }
-        args.json.write_text(json.dumps(result, indent=1) + "\n")
-        print(
-            json.dumps(
-                {k: result[k] for k in ("frames_per_s", "export", "instance_bytes", "annotated_frames")}
+        if keypoint_size:
+            result["figures"].append(
+                {
+                    "id": "dataset_keypoint_bytes_per_frame",
+                    "figure": "recorded keypoints per annotated frame (every person's 33 landmarks: pixels + COCO visibility)",
+                    "value": round(keypoint_size / max(annotated, 1)),
+                    "unit": "bytes",
+                    "note": f"{setup}; included in the instance ground truth's bytes",
+                    "history": "docs/benchmarks/datasets.md",
+                }
             )
-        )
+        if args.scenario != "default":  # figures of its own beside the default scenario's: the
+            # annotation cost and the COCO export (with keypoints where it has people); the
+            # other exports and the instance bytes tell nothing the default scenario's do not
+            own = ("dataset_annotated_fps", "dataset_export_fps", "dataset_keypoint_bytes_per_frame")
+            result["figures"] = [f for f in result["figures"] if f["id"] in own]
+            for figure in result["figures"]:
+                if not figure["id"].startswith("dataset_keypoint"):
+                    figure["id"] += f"_{args.scenario}"
+                    if args.scenario not in figure["figure"]:
+                        figure["figure"] += f" ({args.scenario})"
+        args.json.write_text(json.dumps(result, indent=1) + "\n")
+        keys = ("frames_per_s", "export", "instance_bytes", "keypoint_bytes", "annotated_frames")
+        print(json.dumps({k: result[k] for k in keys}))
     finally:
         shutil.rmtree(root, ignore_errors=True)
 
