@@ -2,14 +2,15 @@
 (TrackEval) of its estimates against the instance ground truth, in world coordinates and per camera.
 
     python benchmarks/tracking.py --json benchmarks/results/tracking_DATE.json [--scenario multi_robot]
-                                  [--duration 30] [--seeds 3]
+                                  [--duration 30] [--seeds 3] [--override KEY=VALUE ... --tag NAME]
 
 Per seed: ``python -m simlan_data.run scenario=SCENARIO duration_s=D seed=S`` with the base
 suite's spawn perturbation and ``cameras.streams=[rgb,semantic,instance]`` (the default GPSS
 cameras, 960x540 at 5 Hz), then ``python -m simlan_data.replay RUN --algorithms tracking`` (the
 localizer's recorded estimates; world similarity max(0, 1 - d / 2 m), matches within 1 m; per
 camera its estimated 3D boxes projected, IoU against the amodal boxes). Figures: the mean over
-seeds, the range beside it. History: docs/benchmarks/tracking.md.
+seeds, the range beside it; ``--override`` (Hydra overrides of every run, e.g. ``sensors=realistic``)
+needs a ``--tag`` that names the figures apart. History: docs/benchmarks/tracking.md.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from common import machine, run_cli
 KEYS = ("hota", "mota", "idf1", "loca", "idsw", "gt_dets")
 
 
-def one(root: Path, scenario: str, duration_s: float, seed: int) -> dict[str, float]:
+def one(root: Path, scenario: str, duration_s: float, seed: int, extra: list[str]) -> dict[str, float]:
     run = root / f"s{seed}"
     proc = run_cli(
         f"scenario={scenario}",
@@ -36,6 +37,7 @@ def one(root: Path, scenario: str, duration_s: float, seed: int) -> dict[str, fl
         "perturbation.spawn_xy_m=0.15",
         "perturbation.spawn_yaw_deg=3",
         "cameras.streams=[rgb,semantic,instance]",
+        *extra,
         f"hydra.run.dir={run}",
     )
     if proc.returncode != 0:
@@ -60,12 +62,20 @@ def main() -> None:
     p.add_argument("--scenario", default="multi_robot")
     p.add_argument("--duration", type=float, default=30.0)
     p.add_argument("--seeds", type=int, default=3)
+    p.add_argument(
+        "--override", nargs="*", default=[], metavar="KEY=VALUE", help="Hydra overrides of every run"
+    )
+    p.add_argument("--tag", default="", help="names the figures of a run with --override")
     p.add_argument("--json", type=Path, required=True)
     args = p.parse_args()
+    if bool(args.override) != bool(args.tag):
+        p.error("--override and --tag go together")
     with tempfile.TemporaryDirectory(prefix="bench_tracking_") as tmp:
-        runs = [one(Path(tmp), args.scenario, args.duration, s) for s in range(args.seeds)]
+        runs = [one(Path(tmp), args.scenario, args.duration, s, args.override) for s in range(args.seeds)]
     mean = {k: statistics.fmean(r[k] for r in runs) for k in runs[0]}
     setup = f"scenario={args.scenario}, {args.duration:g} s, seeds 0-{args.seeds - 1}, default GPSS cameras 960x540 at 5 Hz"
+    setup += "".join(f", {o}" for o in args.override)
+    suffix = f"_{args.tag}" if args.tag else ""
     history = "docs/benchmarks/tracking.md"
     figures = []
     for space, what, sim in (
@@ -75,7 +85,7 @@ def main() -> None:
         values = {k: [r[f"{space}.{k}"] for r in runs] for k in ("hota", "mota", "idf1")}
         figures.append(
             {
-                "id": f"tracking_{space}_hota",
+                "id": f"tracking_{space}_hota{suffix}",
                 "figure": f"marker localizer's tracking, {what}: HOTA / MOTA / IDF1 ({setup})",
                 "value": f"{mean[f'{space}.hota']:.4f} / {mean[f'{space}.mota']:.4f} / {mean[f'{space}.idf1']:.4f}",
                 "unit": "",
@@ -87,7 +97,9 @@ def main() -> None:
         )
     doc = {
         "command": f"python benchmarks/tracking.py --scenario {args.scenario} --duration {args.duration:g} "
-        f"--seeds {args.seeds} --json FILE",
+        f"--seeds {args.seeds}"
+        + (f" --override {' '.join(args.override)} --tag {args.tag}" if args.tag else "")
+        + " --json FILE",
         "machine": machine(),
         "date": datetime.date.today().isoformat(),
         "history": history,
