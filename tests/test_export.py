@@ -46,7 +46,7 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def recorded(made: Path) -> dict:
     """The new topics, decoded independently: table, 3D boxes, and per (camera, stamp) the
     instance image and the 2D boxes message."""
-    out: dict = {"masks": {}, "boxes": {}, "boxes3d": []}
+    out: dict = {"masks": {}, "boxes": {}, "boxes3d": [], "detections": {}, "cubes": []}
     (bag,) = (made / "run" / "recording").glob("*.mcap")
     with bag.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
@@ -63,6 +63,10 @@ def recorded(made: Path) -> dict:
                 out["masks"][(msg.header.frame_id, _stamp(msg))] = image
             elif topic.endswith("/instances/boxes"):
                 out["boxes"][(msg.header.frame_id, _stamp(msg))] = msg
+            elif topic.endswith("/instances/detections"):
+                out["detections"][(msg.header.frame_id, _stamp(msg))] = msg
+            elif topic == "/ground_truth/boxes/markers":
+                out["cubes"].append(msg)
     return out
 
 
@@ -94,6 +98,33 @@ def test_recorded_boxes_are_the_masks_bounds(recorded: dict) -> None:
             assert 0 < msg.visible_fraction[k] <= 1 and 0 <= msg.truncation[k] < 1
             seen += 1
     assert seen >= 10
+
+
+def test_standard_types_carry_the_same_boxes(recorded: dict) -> None:
+    """vision_msgs detections are the visible boxes (centre, size, track id, class name), and the
+    MarkerArray cubes are the 3D boxes: decoded by mcap_ros2 from the schemas the bag embeds."""
+    names = dict(zip(list(recorded["table"].ids), recorded["table"].names, strict=True))
+    assert recorded["detections"].keys() == recorded["boxes"].keys()
+    seen = 0
+    for key, boxes in recorded["boxes"].items():
+        dets = recorded["detections"][key].detections
+        assert [int(d.id) for d in dets] == list(boxes.ids)
+        for d, (u0, v0, u1, v1) in zip(dets, np.reshape(boxes.visible, (-1, 4)).tolist(), strict=True):
+            assert (d.bbox.center.position.x, d.bbox.center.position.y) == ((u0 + u1) / 2, (v0 + v1) / 2)
+            assert (d.bbox.size_x, d.bbox.size_y) == (u1 - u0, v1 - v0)
+            assert d.results[0].hypothesis.score == 1.0
+            seen += int(
+                d.results[0].hypothesis.class_id == "pallet_truck" and names[int(d.id)] == "pallet_truck"
+            )
+    assert seen > 0
+    assert len(recorded["cubes"]) == len(recorded["boxes3d"])
+    for cubes, boxes in zip(recorded["cubes"], recorded["boxes3d"], strict=True):
+        assert [m.id for m in cubes.markers] == list(boxes.ids)
+        centres = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z] for m in cubes.markers])
+        sizes = np.array([[m.scale.x, m.scale.y, m.scale.z] for m in cubes.markers])
+        assert np.allclose(centres, np.reshape(boxes.centers, (-1, 3)))
+        assert np.allclose(sizes, np.reshape(boxes.sizes, (-1, 3)))
+        assert all(m.type == 1 and m.header.frame_id == "map" for m in cubes.markers)  # CUBE in map
 
 
 def test_coco_reads_back_with_pycocotools(made: Path, recorded: dict) -> None:

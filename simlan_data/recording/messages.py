@@ -475,7 +475,8 @@ def pose_array(stamp_ns: int, frame_id: str, points_xy: Sequence[Sequence[float]
     )
 
 
-def _marker(stamp_ns: int, ns: str, marker_id: int, kind: int, **fields: Any) -> Any:
+def marker(stamp_ns: int, ns: str, marker_id: int, kind: int, **fields: Any) -> Any:
+    """visualization_msgs/Marker in map with every field set (``fields`` override the defaults)."""
     base: dict[str, Any] = {
         "header": header(stamp_ns, schema.MAP_FRAME),
         "ns": ns,
@@ -506,11 +507,11 @@ def zone_markers(stamp_ns: int, zones: Sequence[tuple[str, Sequence[Sequence[flo
     markers = []
     for i, (name, corners) in enumerate(zones):
         ring = [Point(x=float(x), y=float(y), z=0.02) for x, y in [*corners, corners[0]]]
-        markers.append(_marker(stamp_ns, "safety_zones", 2 * i, MARKER_LINE_STRIP, points=ring))
+        markers.append(marker(stamp_ns, "safety_zones", 2 * i, MARKER_LINE_STRIP, points=ring))
         cx = float(np.mean([c[0] for c in corners]))
         cy = float(np.mean([c[1] for c in corners]))
         markers.append(
-            _marker(
+            marker(
                 stamp_ns,
                 "safety_zone_names",
                 2 * i + 1,

@@ -58,6 +58,9 @@ INSTANCE_TABLE_TYPE = "simlan_msgs/msg/InstanceTable"
 INSTANCE_BOXES_2D_TYPE = "simlan_msgs/msg/InstanceBoxes2D"
 INSTANCE_BOXES_3D_TYPE = "simlan_msgs/msg/InstanceBoxes3D"
 INSTANCE_KEYPOINTS_TYPE = "simlan_msgs/msg/InstanceKeypoints"
+# the same ground truth in standard types, for ROS tools and viewers (vision_msgs 4.x, Jazzy's)
+DETECTION_2D_ARRAY_TYPE = "vision_msgs/msg/Detection2DArray"
+STANDARD_MSG_DIR = Path(__file__).parent / "ros_types"  # standard types rosbags' typestore lacks
 
 # ------------------------------------------------------------------------------------- topics
 CLOCK = "/clock"
@@ -74,6 +77,7 @@ SAFETY_ZONES = "/safety/zones"
 PEOPLE_DETECTIONS = "/people/detections"
 INSTANCES = "/ground_truth/instances"
 INSTANCE_BOXES_3D = "/ground_truth/boxes"
+INSTANCE_BOX_MARKERS = "/ground_truth/boxes/markers"
 INSTANCE_PNG_FORMAT = "mono16; png compressed mono16"  # instance ids, 16-bit PNG (image_transport's form)
 
 
@@ -202,6 +206,11 @@ def instance_topics(camera_id: str | int) -> dict[str, Topic]:
             INSTANCE_BOXES_2D_TYPE,
             "per instance in the image: visible box (mask), amodal box (3D box projected), visible fraction, truncation",
         ),
+        "detections": Topic(
+            f"{base}/instances/detections",
+            DETECTION_2D_ARRAY_TYPE,
+            "the visible boxes as vision_msgs detections: id = track id, class_id = class name, score 1",
+        ),
         "keypoints": Topic(
             f"{base}/instances/keypoints",
             INSTANCE_KEYPOINTS_TYPE,
@@ -315,6 +324,11 @@ GLOBAL_TOPICS: tuple[Topic, ...] = (
         INSTANCE_BOXES_3D_TYPE,
         "3D box of every instance in map: centre, size, yaw (camera rate, stream instance)",
     ),
+    Topic(
+        INSTANCE_BOX_MARKERS,
+        MARKER_ARRAY_TYPE,
+        "the 3D boxes as cubes (ns = class name, id = track id) for RViz and Foxglove (camera rate, stream instance)",
+    ),
 )
 
 REQUIRED_TOPICS = (CLOCK, TF_STATIC, GROUND_TRUTH_POSES, CONFIG, RUN_INFO)
@@ -338,10 +352,11 @@ def custom_msg_definitions(msg_dir: Path = MSG_DIR) -> dict[str, str]:
 
 @lru_cache(maxsize=1)
 def typestore() -> Typestore:
-    """ROS 2 (Jazzy) types plus the simlan_msgs types."""
+    """ROS 2 (Jazzy) types plus the simlan_msgs types and the standard types rosbags lacks
+    (``ros_types/``: vision_msgs)."""
     store = get_typestore(Stores.ROS2_JAZZY)
     types = {}
-    for name, text in custom_msg_definitions().items():
+    for name, text in {**custom_msg_definitions(STANDARD_MSG_DIR), **custom_msg_definitions()}.items():
         types.update(get_types_from_msg(text, name))
     store.register(types)
     return store

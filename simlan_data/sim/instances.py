@@ -32,12 +32,14 @@ from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.rotations import yaw_from_quat
 from simlan_data.recording import messages as M
 from simlan_data.recording import schema
+from simlan_data.recording import standard_instances as standard
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.sim.agent_base import Agent
 from simlan_data.sim.keypoints import DepthSource, frame_keypoints
 from simlan_data.sim.rendering import CameraImages, LabelTable
 from simlan_data.world._pybullet import pb
 from simlan_data.world.builder import WorldBodies
+from simlan_data.world.labels import LABEL_NAMES
 
 INSTANCE_STREAM = "instance"
 
@@ -176,6 +178,7 @@ class InstanceRecorder:
         self._now: tuple[int, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None
         self._topics: dict[str, dict[str, schema.Topic]] = {}
         self._last: dict[str, tuple[NDArray[np.uint16], Any, FrameBoxes]] = {}  # per camera
+        self._class_of = {o.id: LABEL_NAMES.get(o.class_id, "") for o in self.objects}  # standard types
         writer.write(_global(schema.INSTANCES), 0, M.instance_table(self.objects))
 
     def tick(self, t: int) -> None:
@@ -189,6 +192,8 @@ class InstanceRecorder:
         ids = [obj.id for obj in self.objects]
         msg = M.instance_boxes_3d(self.writer.stamp_ns(t), ids, centers, sizes, yaws)
         self.writer.write(_global(schema.INSTANCE_BOXES_3D), t, msg)
+        cubes = standard.box_markers(self.writer.stamp_ns(t), ids, centers, sizes, yaws, self._class_of)
+        self.writer.write(_global(schema.INSTANCE_BOX_MARKERS), t, cubes)
 
     def record(self, t: int, camera: CameraModel, images: CameraImages, *, stamp_ns: int) -> None:
         """Queue one camera frame's instance image and boxes (encoded on the writer's workers)."""
@@ -209,6 +214,8 @@ class InstanceRecorder:
             self._last[cid] = (images.instances, png, boxes)
         self.writer.submit(topics["instance"], t, functools.partial(_compressed, stamp, camera.frame_id, png))
         self.writer.write(topics["boxes_2d"], t, M.instance_boxes_2d(stamp, camera, boxes))
+        detections = standard.detections_2d(stamp, camera, boxes.ids, boxes.visible, self._class_of)
+        self.writer.write(topics["detections"], t, detections)
         if self.people and cid in self.depth:
             view = self.depth[cid]  # (its camera is the one the image was rendered from: drift)
             keypoints = frame_keypoints(view.camera, self._landmarks, view)
