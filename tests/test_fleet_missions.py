@@ -72,7 +72,7 @@ def _footprint(kind_name: str, pose: list[float]) -> shapely.Polygon:
 
 
 @pytest.mark.parametrize(
-    ("robots", "source"), [(4, "camera"), (8, "camera"), (12, "ground_truth"), (20, "ground_truth")]
+    ("robots", "source"), [(4, "camera"), (8, "camera"), (12, "camera"), (20, "ground_truth")]
 )
 def test_missions_are_seeded_reachable_and_apart(robots: int, source: str) -> None:
     mission = ["scenario=fleet", f"fleet.robots={robots}", f"localization.source={source}"]
