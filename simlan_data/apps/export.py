@@ -30,7 +30,7 @@ from pathlib import Path
 
 from simlan_data.apps.cli import run_cli
 from simlan_data.apps.dataset_formats import CocoWriter, YoloWriter
-from simlan_data.apps.export_shards import export_shards, sweep_runs
+from simlan_data.apps.export_shards import check_out, export_shards, sweep_runs
 from simlan_data.apps.lerobot_export import export_lerobot
 from simlan_data.apps.tracking_formats import BOXES, AiCityWriter, MotWriter
 from simlan_data.apps.trajectory_export import FILE_NAME as TRAJECTORY_FILE
@@ -96,29 +96,19 @@ def _without(argv: list[str], *flags: str) -> list[str]:
     return out
 
 
-def _check_out(out: Path) -> None:
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise ConfigError(
-            "invalid --out",
-            str(out),
-            "it exists and is not an empty directory (export never overwrites)",
-            "choose a new --out or remove it",
-        )
-
-
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     runs = sweep_runs(Path(args.run))
     if runs is not None:  # a sweep: one shard per run (apps/export_shards.py)
-        options = [a for a in (sys.argv[1:] if argv is None else argv) if a not in (args.run,)]
-        return export_shards(runs, args.out, args.format, _without(options, "--format", "--out"), main)
+        given = [a for a in (sys.argv[1:] if argv is None else argv) if a not in (args.run,)]
+        return export_shards(runs, args.out, args.format, _without(given, "--format", "--out"), main)
     if args.format in POSE_FORMATS:
-        _check_out(args.out)
+        check_out(args.out)
         entries = export_trajectory(args.run, args.out, rate_hz=args.rate_hz)
         print(f"exported {entries} stamps ({args.format}) -> {args.out / TRAJECTORY_FILE}")
         return 0
     if args.format in ROBOT_FORMATS:
-        _check_out(args.out)
+        check_out(args.out)
         done = export_lerobot(args.run, args.out, agent=args.agent, task=args.task)
         left = (
             f", {done.incomplete_ticks} ticks without every camera left out" if done.incomplete_ticks else ""
@@ -143,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
             "leave --box out or use --box visible",
         )
     out: Path = args.out
-    _check_out(out)
+    check_out(out)
     with RecordingReader(args.run) as reader:
         topics = camera_topics(reader)
         objects, class_names = instance_table(reader)

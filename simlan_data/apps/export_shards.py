@@ -20,9 +20,20 @@ from pathlib import Path
 
 from simlan_data.errors import ConfigError
 
-__all__ = ["SHARDS_FILE", "export_shards", "sweep_runs"]
+__all__ = ["SHARDS_FILE", "check_out", "export_shards", "sweep_runs"]
 
 SHARDS_FILE = "shards.json"
+
+
+def check_out(out: Path) -> None:
+    """Refuse an ``--out`` that exists and is not an empty directory (export never overwrites)."""
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise ConfigError(
+            "invalid --out",
+            str(out),
+            "it exists and is not an empty directory (export never overwrites)",
+            "choose a new --out or remove it",
+        )
 
 
 def _run_key(path: Path) -> tuple[int, int | str]:
@@ -43,13 +54,7 @@ def export_shards(
 ) -> int:
     """Export every run with ``export_one`` (the export command's ``main``) into ``out/<run name>``
     and write the shard list; returns the exit code."""
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise ConfigError(
-            "invalid --out",
-            str(out),
-            "it exists and is not an empty directory (export never overwrites)",
-            "choose a new --out or remove it",
-        )
+    check_out(out)
     shards: list[dict[str, str]] = []
     for run in runs:
         try:
