@@ -188,7 +188,9 @@ def test_an_unknown_name_lists_the_registered_ones(tmp_path: Path) -> None:
     )
     assert done.returncode == 2, done.stderr
     line = _error_line(done.stderr)
-    assert "no localizer named 'nope'" in line and "registered localizers: aruco, centroid" in line, line
+    assert (
+        "no localizer named 'nope'" in line and "registered localizers: aruco, centroid, foreground" in line
+    ), line
     assert not (tmp_path / "run").exists()
 
 

@@ -10,6 +10,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(
     __name__,
     submod_attrs={
         "aruco_localizer": ["ArucoLocalizer"],
+        "foreground_localizer": ["ForegroundConfig", "ForegroundLocalizer"],
         "birdseye": ["BirdseyeStitcher", "CanvasSpec"],
         "birdseye_stitcher": ["GpssStitcher", "GpssStitcherConfig"],
         "gpss_coordinator": ["GpssCoordinator", "GpssCoordinatorConfig"],

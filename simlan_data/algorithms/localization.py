@@ -508,8 +508,14 @@ class Localizer:
                 tuple(sorted(o.camera_id for o in group)),
             )
             fixes.append(fix)
-            self._pending.append((t_ns + round(self.params.processing_delay_s * NS_PER_S), fix))
+            self.queue_fix(t_ns, fix)
         return fixes
+
+    def queue_fix(self, t_ns: int, fix: PoseFix) -> None:
+        """Hand a fix of the camera tick ``t_ns`` to the filter: it is used from the first
+        :meth:`estimate` at or after ``t_ns`` plus the processing delay (other localizers reuse
+        this filter with fixes of their own)."""
+        self._pending.append((t_ns + round(self.params.processing_delay_s * NS_PER_S), fix))
 
     # ----------------------------------------------------------------------------- filtering
     def estimate(self, t_ns: int) -> dict[str, PoseEstimate]:

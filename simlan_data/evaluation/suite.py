@@ -110,7 +110,8 @@ def _job_config(overrides: list[str], seed: int) -> dict[str, Any]:
                 "deletions and sweeps are not case overrides",
                 "use grid: for sweeps",
             )
-        if (CONF_DIR / key).is_dir() or key.startswith("hydra/"):
+        # (a config group: a folder of conf/, hydra's, or a role's algorithms, registered in code)
+        if (CONF_DIR / key).is_dir() or key.startswith(("hydra/", "algorithms/")):
             defaults.append({f"override /{key}": ov.value()})
         else:
             OmegaConf.update(body, key, ov.value(), force_add=True)
