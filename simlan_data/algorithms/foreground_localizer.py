@@ -5,17 +5,19 @@ each camera sees it; packaged for the GPSS cameras at 960x540), never a marker, 
 
 Data flow per camera tick (live and replay run exactly this)::
 
-    JPEG per camera --decode--> |image - plate| > threshold --> foreground mask (per camera)
+    JPEG per camera --decode--> max over channels |image - plate| > threshold --> mask
         v
-    per robot height h (the top of its body, where its mount says): every camera's mask
-    sampled at the cells of one floor grid lifted to z = h (camera model, lens distortion
-    included) --> per cell: cameras that see it, cameras that see foreground there
+    per robot height h (the top of its body, from its mount): planes through the body
+    (h x ``planes``), every camera's mask sampled at the cells of one grid on each plane (camera
+    model, lens distortion included) --> per cell: cameras that see it, cameras that see
+    foreground there --> occupied where enough agree, on every plane
         v
-    occupied = enough cameras agree --> blobs (connected cells) --> per tracked robot the blob
-    nearest its prediction (one blob per robot) --> centroid = the top of its body
+    blobs (connected columns) --> each robot the blob nearest its prediction (one blob per
+    robot, Hungarian) --> the blob's centre
         v
-    fix (base_link = centroid - mount offset turned by the predicted yaw; yaw not measured)
-        --> the marker localizer's per-robot EKF (commands predict; yaw follows the motion)
+    fix: base_link = centre - its offset in base_link (measured at the start pose) turned by
+    the yaw (measured from the robot's way while it drives, else turned on as commanded)
+        --> the marker localizer's per-robot EKF (commands predict between fixes)
 
 Identity: robots look alike, so each one is first found near where it starts
 (``start_poses``: what GPSS's fleet knows of its parked robots) and then followed.
@@ -46,7 +48,6 @@ BACKGROUNDS_DIR = ASSETS_DIR / "backgrounds"  # <name>/<camera_id>.jpg: the empt
 DEFAULT_BACKGROUND = "gpss_960x540"
 KEY = "algorithms.localizer."
 COARSE = 4  # the cells' pixels are projected on a grid this much coarser, then interpolated
-UNMEASURED_YAW_SIGMA_RAD = 10.0  # a fix says nothing of yaw: the filter takes it from the motion
 
 
 @dataclass(frozen=True)
@@ -224,7 +225,8 @@ class FusionGrid:
 
 @dataclass(frozen=True)
 class Blob:
-    """Connected occupied cells at one height: centroid (map), area and pixel bounds."""
+    """Connected occupied columns of one robot height: their centre (map, weighted by the cameras
+    that agree) and area."""
 
     x_m: float
     y_m: float
