@@ -15,7 +15,7 @@ Data flow per camera tick (live and replay run exactly this)::
     blobs (connected columns) --> each robot the blob nearest its prediction (one blob per
     robot, Hungarian) --> the blob's centre
         v
-    fix: base_link = centre - its offset in base_link (measured at the start pose) turned by
+    fix: base_link = centre - its offset in base_link (the mount's, or measured) turned by
     the yaw (measured from the robot's way while it drives, else turned on as commanded)
         --> the marker localizer's per-robot EKF (commands predict between fixes)
 
@@ -61,7 +61,7 @@ class ForegroundConfig(LocalizerParams):
     cell_m: float = 0.04  # fusion grid cell
     min_cameras: int = 2  # an occupied cell is foreground in at least so many cameras (or in
     # every camera that sees it, where fewer do)
-    min_fraction: float = 0.8  # and in at least this fraction of the cameras that see it
+    min_fraction: float = 0.6  # and in at least this fraction of the cameras that see it
     min_area_m2: float = 0.04  # smaller blobs are noise
     gate_m: float = 1.0  # a robot takes the nearest blob within this of its prediction
     max_range_m: float = 14.0  # a camera's cells: floor points at most this far from under it
@@ -74,8 +74,9 @@ class ForegroundConfig(LocalizerParams):
     merged_ratio: float = 1.6  # a blob this much larger than the robot's at its start: merged
     planes: tuple[float, ...] = (0.2, 0.5, 0.8)  # fusion planes, as fractions of a robot's height
     # (its mount's height_m: the top of its body)
-    calibrate: bool = True  # where the blob's centre lies on the robot: measured at the start
-    # pose (True) or the mount's offset (False)
+    calibrate: bool = False  # where the blob's centre lies on the robot: the top of its body
+    # (under its mount; False) or measured at the start pose (True: a start pose off by d, or a
+    # start poorly covered by the cameras, shifts every estimate of it)
     start_poses: tuple[float, ...] = ()  # x, y, yaw per robot, in the robots' order
     # (agents.* order); empty: a single robot takes the largest blob
 
@@ -85,7 +86,7 @@ class ForegroundConfig(LocalizerParams):
             ("threshold", self.threshold, 0 < self.threshold < 255, "use 25"),
             ("cell_m", self.cell_m, 0.005 <= self.cell_m <= 0.5, "use 0.04"),
             ("min_cameras", self.min_cameras, self.min_cameras >= 1, "use 2"),
-            ("min_fraction", self.min_fraction, 0 < self.min_fraction <= 1, "use 0.8"),
+            ("min_fraction", self.min_fraction, 0 < self.min_fraction <= 1, "use 0.6"),
             ("gate_m", self.gate_m, self.gate_m > 0, "use 1.0"),
             ("sigma_xy_m", self.sigma_xy_m, self.sigma_xy_m > 0, "use 0.03"),
             (
@@ -333,8 +334,8 @@ class ForegroundLocalizer:
         self._commanded: dict[str, tuple[float, float]] = {}
         self._turn: dict[str, tuple[int, float, float]] = {}  # (since, turned so far, yaw rate)
         self._yaw_ref: dict[str, tuple[float, float]] = {}  # yaw last measured, turned then
-        # where the blob's centre lies in base_link: measured on the first sight of a robot at
-        # its start pose (the shape of its body decides it, not the marker mount)
+        # where the blob's centre lies in base_link: the top of the body (the mount stands on
+        # it), or measured at the start pose (calibrate)
         self.offsets: dict[str, tuple[float, float]] = {m.namespace: m.offset_xy_m for m in self.robots}
         self.areas: dict[str, float] = {}  # its blob's area there (larger blobs: merged, not used)
         self._samples: dict[str, list[tuple[float, float, float]]] = {m.namespace: [] for m in self.robots}
@@ -411,9 +412,9 @@ class ForegroundLocalizer:
 
     def _calibrate(self, mount: MarkerMount, blob: Blob) -> None:
         """While a robot with a start pose stands there (never commanded to move): its blob's
-        centre in base_link and its area, the mean over the frames so far."""
+        area and (``calibrate``) its centre in base_link, the mean over the frames so far."""
         ns = mount.namespace
-        if ns in self._moved or not self.config.start_poses or not self.config.calibrate:
+        if ns in self._moved or not self.config.start_poses:
             return
         i = self.robots.index(mount)
         x, y, yaw = self.config.start_poses[3 * i : 3 * i + 3]
@@ -421,7 +422,9 @@ class ForegroundLocalizer:
         dx, dy = blob.x_m - x, blob.y_m - y
         self._samples[ns].append((c * dx + s * dy, -s * dx + c * dy, blob.area_m2))
         ox, oy, area = np.mean(self._samples[ns], axis=0).tolist()
-        self.offsets[ns], self.areas[ns] = (ox, oy), area
+        self.areas[ns] = area
+        if self.config.calibrate:
+            self.offsets[ns] = (ox, oy)
 
     def _top(self, mount: MarkerMount, x: float, y: float, yaw: float) -> tuple[float, float]:
         """The centre of a robot's blob in map, from its base_link pose."""
