@@ -78,6 +78,9 @@ PEOPLE_DETECTIONS = "/people/detections"
 INSTANCES = "/ground_truth/instances"
 INSTANCE_BOXES_3D = "/ground_truth/boxes"
 INSTANCE_BOX_MARKERS = "/ground_truth/boxes/markers"
+POSEMAP_SOURCE_IMAGE = "/posemap/source/image_raw/compressed"
+POSEMAP_SOURCE_LANDMARKS = "/posemap/source/pose_landmarks"
+POSEMAP_SOURCE_FRAME = "posemap_source"  # the source's camera: not one of the twin's
 INSTANCE_PNG_FORMAT = "mono16; png compressed mono16"  # instance ids, 16-bit PNG (image_transport's form)
 
 
@@ -313,6 +316,16 @@ GLOBAL_TOPICS: tuple[Topic, ...] = (
         PEOPLE_DETECTIONS,
         POSE_ARRAY_TYPE,
         "people found in the cameras' segmentation images, fused, frame map, image stamp (camera rate, runs with people)",
+    ),
+    Topic(
+        POSEMAP_SOURCE_IMAGE,
+        COMPRESSED_IMAGE_TYPE,
+        "the frames of a drive's image or video source (posemap.source), JPEG, at the source's rate",
+    ),
+    Topic(
+        POSEMAP_SOURCE_LANDMARKS,
+        POSE_LANDMARKS_TYPE,
+        "MediaPipe Pose's landmarks of each source frame (posemap.source), what the pose mapper read",
     ),
     Topic(
         INSTANCES,

@@ -7,6 +7,10 @@
                                     (the built-in ``trained``: algorithms.posemap.model=MODEL) -->
                                     joint targets, frame k at k / cameras.rate_hz (dataset) or at its
                                     recorded stamp
+    posemap.source=FILE             a video, an image or a folder of images --> MediaPipe Pose per
+                                    frame (:mod:`~simlan_data.algorithms.posemap.source`) --> the same
+                                    pose mapper (one camera's) --> joint targets, frame k at k / fps;
+                                    a frame without a person holds the last pose
 
 The pose mapper is built through the registry (:mod:`simlan_data.algorithms.registry`) from its
 own config, as the ``posemap`` replay builds it from a recording's, with the landmark source's
@@ -16,7 +20,8 @@ Every control tick the posed humanoid ``posemap.namespace`` takes its targets an
 positions are recorded on ``/<ns>/joint_states`` (sensor_msgs/JointState). With
 ``posemap.landmarks_rate_hz > 0`` the projection estimator runs on the rendered camera frames and
 publishes ``/camera_<id>/pose_landmarks`` (a landmark stream a later drive can replay). The
-drive's input landmarks are published on the same topics (estimator ``replay``).
+drive's input landmarks are published on the same topics (estimator ``replay``); a
+``posemap.source``'s frames and landmarks on ``/posemap/source/...`` (they are not the twin's cameras).
 """
 
 from __future__ import annotations
@@ -30,9 +35,16 @@ from numpy.typing import NDArray
 
 from simlan_data.algorithms import registry
 from simlan_data.algorithms.posemap.config import TrainedMapperParams
-from simlan_data.algorithms.posemap.estimators import CameraView, ProjectionEstimator
+from simlan_data.algorithms.posemap.estimators import CameraView, MediaPipeEstimator, ProjectionEstimator
 from simlan_data.algorithms.posemap.metrics import mpjpe
 from simlan_data.algorithms.posemap.motion import load_motion
+from simlan_data.algorithms.posemap.source import (
+    FrameReader,
+    SourceLandmarks,
+    estimate_source,
+    hold_undetected,
+    open_frames,
+)
 from simlan_data.algorithms.roles import PosemapContext
 from simlan_data.algorithms.trained_posemap import TrainedPoseMapper, camera_ids
 from simlan_data.config.algorithms import selected_algorithm
@@ -42,11 +54,18 @@ from simlan_data.errors import ConfigError
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.recording import messages as M
 from simlan_data.recording import schema
+from simlan_data.recording.codecs import JPEG_FORMAT, encode_rgb
 from simlan_data.recording.writer import RecordingWriter
 from simlan_data.sim.humanoid import PosedHumanoidAgent
-from simlan_data.sim.posemap_inputs import LandmarkStream, load_stream, source_cameras
+from simlan_data.sim.posemap_inputs import LandmarkStream, load_stream, source_cameras, stream_from_source
 from simlan_data.sim.rendering import CameraImages
 from simlan_data.world.skeleton import JOINT_NAMES
+
+# the scenario of conf/experiment/posemap_video.yaml, which needs posemap.source (a `???` there would
+# not do: OmegaConf's merge keeps the schema's "" under a missing value)
+VIDEO_SCENARIO = "posemap_video"
+SOURCE_IMAGE = next(t for t in schema.GLOBAL_TOPICS if t.name == schema.POSEMAP_SOURCE_IMAGE)
+SOURCE_LANDMARKS = next(t for t in schema.GLOBAL_TOPICS if t.name == schema.POSEMAP_SOURCE_LANDMARKS)
 
 
 @dataclass
@@ -57,6 +76,7 @@ class DriveInputs:
     stream: LandmarkStream | None = None
     predicted: NDArray[np.float64] | None = None  # the model's joint targets per stream frame
     predict_s: float = 0.0
+    source: SourceLandmarks | None = None  # posemap.source: its frames and MediaPipe's landmarks
 
 
 def selected_mapper(cfg: Config) -> tuple[registry.AlgorithmSpec, Any]:
@@ -94,14 +114,16 @@ def build_mapper(cfg: Config, source: str) -> tuple[Any, list[str]]:
 def load_drive_inputs(cfg: Config) -> DriveInputs | None:
     """Motion files, or the landmark source and the model (which predicts every frame now)."""
     pm = cfg.posemap
-    if not (pm.drive or pm.motion or pm.landmarks_rate_hz > 0):
+    if not (
+        pm.drive or pm.source or pm.motion or pm.landmarks_rate_hz > 0 or cfg.scenario.name == VIDEO_SCENARIO
+    ):
         return None
     agent = cfg.agents.get(pm.namespace)
     if agent is None or agent.type != "posed_humanoid":
         raise ConfigError(
             f"no posed humanoid {pm.namespace}",
             "posemap.namespace",
-            "posemap.drive, posemap.motion and posemap.landmarks_rate_hz pose an agent of type posed_humanoid",
+            "posemap.drive, posemap.source, posemap.motion and posemap.landmarks_rate_hz pose an agent of type posed_humanoid",
             "add one (agents=posed_humanoid) or set posemap.namespace",
         )
     if pm.landmarks_rate_hz > 0:
@@ -114,19 +136,69 @@ def load_drive_inputs(cfg: Config) -> DriveInputs | None:
                 f"use e.g. {cfg.cameras.rate_hz:g}",
             )
     out = DriveInputs()
-    if pm.drive:
-        mapper, cameras = build_mapper(cfg, pm.drive)
-        out.stream = load_stream(
-            pm.drive, cameras, period_ns=round(NS_PER_S / cfg.cameras.rate_hz), namespace=pm.namespace
+    if cfg.scenario.name == VIDEO_SCENARIO and not pm.source:
+        raise ConfigError.invalid(
+            "posemap.source",
+            pm.source,
+            f"experiment={VIDEO_SCENARIO} drives the humanoid from images or a video",
+            "set posemap.source=FILE (a video, an image or a folder of images)",
         )
+    if pm.drive or pm.source:
+        # (the file first: a video that cannot be read says so before a model is loaded)
+        frames = (
+            open_frames(
+                pm.source, fps=pm.source_fps, image_fps=cfg.cameras.rate_hz, duration_s=cfg.duration_s
+            )
+            if pm.source
+            else None
+        )
+        mapper, cameras = build_mapper(cfg, pm.drive or pm.source)
+        if frames is not None:
+            out.source = source_landmarks(cfg, frames, cameras)
+            out.stream = stream_from_source(out.source, cameras[0])
+        else:
+            out.stream = load_stream(
+                pm.drive, cameras, period_ns=round(NS_PER_S / cfg.cameras.rate_hz), namespace=pm.namespace
+            )
         t0 = time.perf_counter()
+        # (a source's frames without a person are not mapped: the humanoid holds the last pose)
+        landmarks = out.stream.landmarks if out.source is None else out.stream.landmarks[out.source.detected]
         # rig features are in the frame of the source's person (where it stood), not the driven one
-        predicted = mapper.predict(out.stream.landmarks, position=out.stream.position)
-        out.predicted = check_targets(predicted, len(out.stream.landmarks), "config algorithms.posemap")
+        predicted = mapper.predict(landmarks, position=out.stream.position)
+        out.predicted = check_targets(predicted, len(landmarks), "config algorithms.posemap")
+        if out.source is not None:
+            out.predicted = hold_undetected(out.predicted, out.source.detected)
         out.predict_s = time.perf_counter() - t0
     elif pm.motion:
         out.keys = np.stack([load_motion(m) for m in pm.motion])
     return out
+
+
+def source_landmarks(cfg: Config, frames: FrameReader, cameras: list[str]) -> SourceLandmarks:
+    """MediaPipe Pose on every frame of ``posemap.source``, each frame kept as the recorder's JPEG."""
+    check_one_camera(cfg, cameras)
+    estimator = MediaPipeEstimator(cfg.posemap.mediapipe_python)
+    try:
+        return estimate_source(frames, estimator, lambda rgb: encode_rgb(rgb, "jpeg")[1])
+    finally:
+        estimator.close()
+
+
+def check_one_camera(cfg: Config, cameras: list[str]) -> None:
+    """An image or video source is one camera's view: the pose mapper must read one camera.
+
+    Raises:
+        ConfigError: it reads several (or none).
+    """
+    if len(cameras) == 1:
+        return
+    model = getattr(selected_mapper(cfg)[1], "model", "")
+    raise ConfigError(
+        "pose mapper reads several cameras",
+        f"algorithms.posemap.model={model}" if model else "config algorithms.posemap",
+        f"posemap.source is one camera's view; the mapper reads {len(cameras)} ({', '.join(cameras) or 'none'})",
+        "train a one-camera model: experiment=posemap_train posemap.cameras=[502] posemap.features=image",
+    )
 
 
 def check_targets(predicted: Any, frames: int, where: str) -> NDArray[np.float64]:
@@ -161,6 +233,7 @@ class PoseDriver:
         self.period_ns = round(pm.motion_period_s * NS_PER_S)
         self.stream = inputs.stream
         self.predicted = inputs.predicted
+        self.source = inputs.source
         self.metrics: dict[str, float] = {}
         self._published_frame = -1
         if self.predicted is not None:
@@ -168,6 +241,8 @@ class PoseDriver:
             self.metrics["posemap.drive.predict_ms_per_frame"] = (
                 1e3 * inputs.predict_s / max(1, len(self.predicted))
             )
+        if self.source is not None:
+            self.metrics.update(self.source.metrics())
         self.estimator = ProjectionEstimator(seed=cfg.seed + 1) if pm.landmarks_rate_hz > 0 else None
         self.landmarks_every = (
             round(cfg.cameras.rate_hz / pm.landmarks_rate_hz) if pm.landmarks_rate_hz > 0 else 0
@@ -207,6 +282,9 @@ class PoseDriver:
         if k < 0 or k == self._published_frame:
             return
         self._published_frame = k
+        if self.source is not None:
+            self._publish_source(t_ns, k)
+            return
         for c, cam in enumerate(self.stream.cameras):
             width, height = self.stream.sizes.get(cam, (0, 0))
             topic = schema.camera_topics(cam, rgb="jpeg", depth=None, semantic=None)["pose_landmarks"]
@@ -222,6 +300,29 @@ class PoseDriver:
                     height=height,
                 ),
             )
+
+    def _publish_source(self, t_ns: int, k: int) -> None:
+        """Frame k of an image or video source and MediaPipe's landmarks of it."""
+        assert self.source is not None
+        stamp = self.writer.stamp_ns(t_ns)
+        reader = self.source.reader
+        self.writer.write(
+            SOURCE_IMAGE,
+            t_ns,
+            M.compressed_image(stamp, schema.POSEMAP_SOURCE_FRAME, JPEG_FORMAT, self.source.jpeg[k]),
+        )
+        self.writer.write(
+            SOURCE_LANDMARKS,
+            t_ns,
+            M.pose_landmarks(
+                stamp,
+                schema.POSEMAP_SOURCE_FRAME,
+                self.source.landmarks[k],
+                estimator=MediaPipeEstimator.name,
+                width=reader.width,
+                height=reader.height,
+            ),
+        )
 
     def camera_tick(
         self, t_ns: int, frame_index: int, frames: list[tuple[CameraModel, CameraImages]]

@@ -4,6 +4,7 @@ One reader for the live drive (``posemap.drive``, :mod:`simlan_data.sim.posemap_
 ``posemap`` replay (:mod:`~simlan_data.evaluation.posemap_replay`)::
 
     dataset.parquet                       --> frames (F, C, 33, 4) + joints (F, 47), frame k at k * period
+    images or a video (posemap.source)    --> MediaPipe's landmarks as one camera's frames, no truth
     recording: /camera_<id>/pose_landmarks --> frames grouped by stamp (every camera present)
                /<ns>/joint_states          --> the posed humanoid's joints at those stamps (truth)
 """
@@ -18,7 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.posemap.dataset import META_NAME, PARQUET_NAME, read_dataset, resolve_dataset
+from simlan_data.algorithms.posemap.estimators import MediaPipeEstimator
 from simlan_data.algorithms.posemap.features import Rig
+from simlan_data.algorithms.posemap.source import SourceLandmarks
 from simlan_data.errors import ConfigError, SimlanError
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.rotations import yaw_from_quat
@@ -69,6 +72,20 @@ def stream_from_dataset(path: str, cameras: list[str], period_ns: int) -> Landma
         sizes,
         (data.estimator,),
         [float(v) for v in position] if position else None,
+    )
+
+
+def stream_from_source(source: SourceLandmarks, camera: str) -> LandmarkStream:
+    """MediaPipe's landmarks of an image or video source as one camera's stream (no truth; the
+    person stood where the model's training data stood)."""
+    reader = source.reader
+    return LandmarkStream(
+        source.stamps_ns,
+        [camera],
+        source.landmarks[:, None],
+        None,
+        {camera: (reader.width, reader.height)},
+        (MediaPipeEstimator.name,),
     )
 
 

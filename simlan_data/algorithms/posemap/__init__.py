@@ -15,6 +15,7 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(
         "metrics": ["mpjpe", "per_joint"],
         "models": ["GBMMapper", "MLPMapper", "PoseMapper", "load_mapper"],
         "motion": ["load_motion"],
+        "source": ["SourceLandmarks", "estimate_source", "open_frames"],
         "training": ["TrainedMapper", "train", "train_from_config"],
     },
 )

@@ -7,6 +7,7 @@ one-line ConfigError naming the key, the value and the fix.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -69,6 +70,10 @@ class PosemapConfig:
     motion_period_s: float = 2.0
     namespace: str = "robot_agent_1"  # the posed humanoid driven by drive/motion
     landmarks_rate_hz: float = 0.0  # > 0: the live projection estimator publishes landmarks per camera
+    # --- drive from images or a video (experiment=posemap_video): MediaPipe Pose on every frame,
+    # then the pose mapper as for posemap.drive (a model of one camera)
+    source: str = ""  # a video file, an image, or a folder of images
+    source_fps: float = 0.0  # frames per second of the source; 0: a video's own, cameras.rate_hz for images
 
     @property
     def hidden_layers(self) -> list[int]:
@@ -153,6 +158,20 @@ class PosemapConfig:
         if not 0 <= self.landmarks_rate_hz <= 100:
             raise _bad(
                 "landmarks_rate_hz", self.landmarks_rate_hz, "must be within 0..100 Hz (0: off)", "use 5"
+            )
+        if not (math.isfinite(self.source_fps) and 0 <= self.source_fps <= 240):
+            raise _bad(
+                "source_fps",
+                self.source_fps,
+                "must be within 0..240 frames per second (0: a video's own rate)",
+                "use e.g. 30, or 0",
+            )
+        if self.source and self.drive:
+            raise _bad(
+                "source",
+                self.source,
+                f"posemap.drive={self.drive} is set too: the humanoid follows one source",
+                "give posemap.source (images, video) or posemap.drive (landmarks), not both",
             )
         if not 1 <= self.threads <= 64:
             raise _bad("threads", self.threads, "must be within 1..64", "use 2")

@@ -171,16 +171,24 @@ class MediaPipeEstimator(PoseEstimator):
         return dict(json.loads(line))
 
     def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]:
+        images = [view.rgb for view in views]
+        if any(rgb is None for rgb in images):
+            raise ValueError("the MediaPipe estimator needs the RGB image")
+        return self.estimate_images(images)  # type: ignore[arg-type]
+
+    def estimate_images(self, images: Sequence[NDArray[np.uint8]]) -> NDArray[np.float32]:
+        """Landmarks (n, 33, 4) of RGB images (H, W, 3) that need no camera model (video files).
+
+        Send a few images per call: the answers wait in the worker's stdout pipe until all are sent.
+        """
         assert self.proc.stdin is not None
-        out = np.zeros((len(views), NUM_LANDMARKS, 4), dtype=np.float32)
-        for view in views:
-            if view.rgb is None:
-                raise ValueError("the MediaPipe estimator needs the RGB image")
-            rgb = np.ascontiguousarray(view.rgb, dtype=np.uint8)
+        out = np.zeros((len(images), NUM_LANDMARKS, 4), dtype=np.float32)
+        for image in images:
+            rgb = np.ascontiguousarray(image, dtype=np.uint8)
             self.proc.stdin.write(json.dumps({"h": rgb.shape[0], "w": rgb.shape[1]}).encode() + b"\n")
             self.proc.stdin.write(rgb.tobytes())
         self.proc.stdin.flush()
-        for i in range(len(views)):
+        for i in range(len(images)):
             rows = self._read()["landmarks"]
             if rows:
                 out[i] = np.asarray(rows, dtype=np.float32)
