@@ -5,7 +5,8 @@ One 5 s run of three agents under cameras 162-163 (480x270, walls and floor mark
 - robot_agent_1, a pallet truck, drives east into a zone it may not enter: stopped in front of it;
 - robot_agent_2, a Jackal, drives north out of the cameras' coverage (observability timeout 0.5 s,
   navigation kept going on its dead-reckoned estimate): stopped blind;
-- robot_agent_3, a person, walks along the aisle: found in the segmentation images.
+- robot_agent_3, a person, walks along the aisle: found in the segmentation images (the oracle:
+  the light world differs from the RGB detector's plates).
 
 Then the counterfactual replay: unchanged it reproduces the live events; with a zone on the
 Jackal's path it turns "entered" into "prevented"; bad zones are refused with one line, exit 2.
@@ -44,6 +45,7 @@ defaults:
 scenario: {{name: safety_test}}
 duration_s: 5.0
 world: {{fidelity: light, settle_s: 0.0}}
+people: {{detector: segmentation_oracle}}  # (the RGB detector's plates show the full warehouse, not this light one)
 cameras: {{ids: [162, 163], width: 480, height: 270}}
 algorithms:
   localizer: {{lost_timeout_s: 30.0}}

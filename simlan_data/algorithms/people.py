@@ -2,39 +2,58 @@
 
 Data flow per camera tick::
 
-    segmentation image per camera --class humanoid (53)--> connected blobs (cv2)
-        |  each blob's pixels -> rays (camera model, with distortion) -> floor plane z = 0
+    colour image per camera (people.detector=rgb, the default)
+        |  |image - plate| (plate: the empty warehouse, gain-normalized per colour channel)
+        |  minus each robot's body box (its estimated pose, footprint and height, projected)
+        v
+    person mask per camera  <-- or: segmentation image, class humanoid (53)
+        |                        (people.detector=segmentation_oracle: the upper bound)
+        v
+    connected blobs (cv2); each blob's pixels -> rays (camera model, with distortion) -> floor z = 0
         v
     foot point: the blob's floor point nearest the camera's nadir (the body above the feet
         projects further out), moved one body radius outwards; a blob whose floor projection is
         much shorter than a whole person's would be (legs or head hidden behind a shelf, cut by
-        the image border) is dropped: its foot point would be wrong --> detections per camera
+        the image border, or a low object: a box, a distractor) is dropped --> detections
         v
     fuse across cameras (greedy clusters) --> positions (recorded on /people/detections)
         v
     PersonTracker (constant-velocity Kalman filter per track) --> people at every control tick
 
-The segmentation image stands in for a person detector: it sees only what a camera sees (no
-person outside coverage or behind a shelf), and the position comes from the camera models, never
-from ground truth. Pure numpy/OpenCV.
+The RGB detector reads the colour image only (no labels, no depth); the oracle reads the rendered
+segmentation, so it sees every visible person and nothing else: the suites compare the two
+(benchmarks/people.py, docs/safety.md). Both see only what a camera sees (no person outside
+coverage or behind a shelf), and positions come from the camera models, never from ground truth.
+Pure numpy/OpenCV.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+import logging
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.algorithms.background import AdaptiveBackground, background_dir, read_plate
 from simlan_data.algorithms.safety import Mover
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError
 from simlan_data.geometry.camera import CameraModel
 
+log = logging.getLogger(__name__)
+
 HUMANOID_LABEL = 53
+MISMATCH_SHARE = 0.2  # a first frame this much foreground: the plate shows another scene
+WALK_MPS = 0.3  # a track this fast for WALK_UPDATES updates in a row has walked: a person, not
+WALK_UPDATES = 5  # clutter (whose track may hop once between blobs, then stands)
+RGB, ORACLE = "rgb", "segmentation_oracle"
+DETECTORS = (RGB, ORACLE)
+Footprint = tuple[float, float, float, float]  # x0, x1, y0, y1 in base_link
+Pose2D = tuple[float, float, float]  # x, y, yaw in map
 
 
 @dataclass
@@ -42,6 +61,17 @@ class PeopleParams:
     """Person detection from the cameras (the run's ``people`` section; the replay reads the recorded one)."""
 
     enabled: bool = True
+    detector: str = RGB  # rgb: colour images against background plates | segmentation_oracle:
+    # the rendered segmentation (an upper bound, not a detector)
+    background: str = "gpss_960x540"  # rgb: plates (a folder of <camera_id>.jpg|png, or a packaged name)
+    threshold: int = 30  # rgb: foreground where a colour channel differs more from the plate (0..255)
+    robot_height_m: float = 2.2  # rgb: a robot's body box (footprint, this tall) is not a person
+    robot_margin_m: float = 0.25  # rgb: the box grown by this (its pose is a control tick old)
+    absorb_frames: int = 5  # rgb: foreground unchanged for this many frames of a camera joins its
+    # background (a recoloured shelf, a sunlit patch, a moved box), except where robots or people
+    # who walked within protect_s are; 0: the plate alone
+    protect_s: float = 10.0  # rgb: a person who stands still longer joins the background (lost);
+    # bounds how long a ghost (an absorbed person who left, on a floor unlike the plate) lasts
     min_pixels: int = 12  # smaller blobs are ignored
     max_pixels: int = 400  # pixels per blob used for the foot point (subsampled, deterministic)
     body_radius_m: float = 0.15  # feet edge -> body centre
@@ -53,6 +83,24 @@ class PeopleParams:
     min_extent: float = 0.6  # a blob must span this share of a whole person's floor projection
 
     def __post_init__(self) -> None:
+        if self.detector not in DETECTORS:
+            raise ConfigError.invalid(
+                "people.detector", self.detector, f"known: {', '.join(DETECTORS)}", "use people.detector=rgb"
+            )
+        rgb_keys = ("threshold", "robot_height_m", "robot_margin_m", "absorb_frames", "protect_s")
+        if (
+            not 0 < self.threshold < 255
+            or self.robot_height_m <= 0
+            or self.robot_margin_m < 0
+            or not 0 <= self.absorb_frames <= 250
+            or self.protect_s < 0
+        ):
+            raise ConfigError.invalid(
+                "people",
+                {k: getattr(self, k) for k in rgb_keys},
+                "threshold within 1..254, robot_height_m > 0, robot_margin_m >= 0, absorb_frames within 0..250, protect_s >= 0",
+                "use the defaults",
+            )
         if (
             self.min_pixels < 1
             or not 0 <= self.body_radius_m <= 1
@@ -75,16 +123,137 @@ class PersonDetection:
     pixels: int
 
 
+def segmentation_mask(labels: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The oracle's person mask: the rendered humanoid class."""
+    return (labels == HUMANOID_LABEL).astype(np.uint8)
+
+
+def load_person_plates(name: str, cameras: Mapping[str, CameraModel]) -> dict[str, NDArray[np.uint8]]:
+    """Each camera's background plate at its resolution; refused if one is missing.
+
+    Raises:
+        ConfigError: no plate for a camera (one line naming ``people.background`` and the fix).
+    """
+    folder = background_dir(name)
+    plates = {}
+    for cid, cam in cameras.items():
+        plate = read_plate(folder, cid, cam.width, cam.height)
+        if plate is None:
+            raise ConfigError.invalid(
+                "people.background",
+                name,
+                f"no plate {cid}.jpg or .png in {folder}",
+                "give a folder with one per camera, or use people.detector=segmentation_oracle",
+            )
+        plates[cid] = plate
+    return plates
+
+
 class PersonDetector:
-    """Blobs of the humanoid class in each camera's segmentation image -> floor positions."""
+    """Blobs of a person mask per camera -> floor positions. The mask comes from the colour image
+    (``rgb``: foreground against the plate, robots' boxes removed) or from the segmentation
+    (``segmentation_oracle``)."""
 
-    def __init__(self, cameras: dict[str, CameraModel], params: PeopleParams | None = None) -> None:
-        self.cameras = cameras
+    def __init__(
+        self,
+        cameras: Mapping[str, CameraModel],
+        params: PeopleParams | None = None,
+        robots: Mapping[str, Footprint] | None = None,
+    ) -> None:
+        self.cameras = dict(cameras)
         self.params = params or PeopleParams()
-
-    def detect(self, camera_id: str, labels: NDArray[np.uint8]) -> list[PersonDetection]:
+        self.robots = dict(robots or {})  # robot namespace -> footprint (rgb: removed from the mask)
+        plates = (
+            load_person_plates(self.params.background, self.cameras) if self.params.detector == RGB else {}
+        )
         p = self.params
-        mask = (labels == HUMANOID_LABEL).astype(np.uint8)
+        self.backgrounds = {
+            cid: AdaptiveBackground(plate, p.threshold, p.absorb_frames) for cid, plate in plates.items()
+        }
+        self._checked: set[str] = set()  # cameras whose first frame was compared with the plate
+
+    def detect(
+        self,
+        camera_id: str,
+        *,
+        labels: NDArray[np.uint8] | None = None,
+        bgr: NDArray[np.uint8] | None = None,
+        robot_poses: Mapping[str, Pose2D] | None = None,
+        people_xy: Sequence[tuple[float, float]] = (),
+    ) -> list[PersonDetection]:
+        """One camera's people, from the input the detector reads (none given: none found).
+        ``robot_poses``: where the robots are believed (rgb: removed); ``people_xy``: people
+        being tracked (rgb: never absorbed into the background)."""
+        if self.params.detector == ORACLE:
+            return [] if labels is None else self.detect_mask(camera_id, segmentation_mask(labels))
+        if bgr is None:
+            return []
+        mask = self.rgb_mask(camera_id, bgr, robot_poses or {}, people_xy)
+        if camera_id not in self._checked:  # once per camera: plates of another scene?
+            self._checked.add(camera_id)
+            share = float(mask.mean())
+            if share > MISMATCH_SHARE:
+                log.warning(
+                    "people.background: camera %s differs from its plate in %.0f %% of its pixels (plates of "
+                    "another world or fidelity?): make plates of this scene or use "
+                    "people.detector=segmentation_oracle (docs/safety.md)",
+                    camera_id,
+                    100 * share,
+                )
+        return self.detect_mask(camera_id, mask)
+
+    def rgb_mask(
+        self,
+        camera_id: str,
+        bgr: NDArray[np.uint8],
+        robot_poses: Mapping[str, Pose2D],
+        people_xy: Sequence[tuple[float, float]] = (),
+    ) -> NDArray[np.uint8]:
+        """Foreground against the camera's background, less what the robots at ``robot_poses``
+        cover; neither they nor the people at ``people_xy`` are absorbed into the background."""
+        p, cam = self.params, self.cameras[camera_id]
+        robots = np.zeros(bgr.shape[:2], np.uint8)
+        for ns, pose in sorted(robot_poses.items()):
+            footprint = self.robots.get(ns)
+            if (
+                footprint is not None
+                and (hull := self._box_hull(cam, footprint, pose, p.robot_height_m)) is not None
+            ):
+                cv2.fillConvexPoly(robots, hull, 1)
+        protected = robots.copy()
+        r = p.radius_m
+        for x, y in people_xy:
+            if (hull := self._box_hull(cam, (-r, r, -r, r), (x, y, 0.0), p.height_m + 0.2)) is not None:
+                cv2.fillConvexPoly(protected, hull, 1)
+        mask = self.backgrounds[camera_id].foreground(bgr, protected)
+        mask[robots > 0] = 0
+        return mask
+
+    def _box_hull(
+        self, cam: CameraModel, footprint: Footprint, pose: Pose2D, height_m: float
+    ) -> NDArray[np.int32] | None:
+        """The image outline (convex hull, pixels) of a box on the floor (``footprint`` at ``pose``
+        grown by ``robot_margin_m``, ``height_m`` tall), or None if it lies behind the camera."""
+        m = self.params.robot_margin_m
+        x0, x1, y0, y1 = footprint
+        # corners and edge midpoints: the lens bends the box's edges
+        gx, gy, gz = np.meshgrid(
+            np.linspace(x0 - m, x1 + m, 3),
+            np.linspace(y0 - m, y1 + m, 3),
+            np.linspace(0.0, height_m, 3),
+        )
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        xs, ys = gx.ravel(), gy.ravel()
+        pts = np.stack([pose[0] + c * xs - s * ys, pose[1] + s * xs + c * ys, gz.ravel()], axis=1)
+        uv, front = cam.project(pts)
+        if not front.any():
+            return None
+        uv = np.clip(uv[front], -1e5, 1e5)
+        return np.asarray(cv2.convexHull(np.round(uv).astype(np.int32)), dtype=np.int32)
+
+    def detect_mask(self, camera_id: str, mask: NDArray[np.uint8]) -> list[PersonDetection]:
+        """The people in one camera's person mask (1: person pixel)."""
+        p = self.params
         if not mask.any():
             return []
         count, blobs, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
@@ -100,7 +269,7 @@ class PersonDetector:
                 int(stats[i, k])
                 for k in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH, cv2.CC_STAT_HEIGHT)
             )
-            if x <= 0 or y <= 0 or x + w >= labels.shape[1] or y + h >= labels.shape[0]:
+            if x <= 0 or y <= 0 or x + w >= mask.shape[1] or y + h >= mask.shape[0]:
                 continue  # cut by the image border
             vs, us = np.nonzero(blobs[y : y + h, x : x + w] == i)
             step = max(1, len(us) // p.max_pixels)
@@ -158,6 +327,8 @@ class _Track:
     t_ns: int
     last_seen_ns: int
     hits: int = 1
+    walking: int = 0  # updates in a row at WALK_MPS or faster
+    walked_ns: int | None = None  # the last update at which it had walked WALK_UPDATES in a row
 
 
 @dataclass
@@ -213,6 +384,9 @@ class PersonTracker:
             tr.P = (np.eye(4) - K @ H) @ P
             tr.t_ns, tr.last_seen_ns = t_ns, t_ns
             tr.hits += 1
+            tr.walking = tr.walking + 1 if np.hypot(tr.x[2], tr.x[3]) >= WALK_MPS else 0
+            if tr.walking >= WALK_UPDATES:
+                tr.walked_ns = t_ns
         for i, (px, py) in enumerate(positions):
             if i in used_det:
                 continue
@@ -226,6 +400,17 @@ class PersonTracker:
                 )
             )
             self._next_id += 1
+
+    def walked(self, t_ns: int) -> list[tuple[float, float]]:
+        """Where the tracks that walked (WALK_MPS or faster for WALK_UPDATES updates in a row)
+        within ``protect_s`` before ``t_ns`` were last updated: people, not clutter (the RGB
+        detector does not absorb them into its background while they stand)."""
+        horizon = round(self.params.protect_s * NS_PER_S)
+        return [
+            (float(tr.x[0]), float(tr.x[1]))
+            for tr in self._tracks
+            if tr.walked_ns is not None and t_ns - tr.walked_ns <= horizon
+        ]
 
     def people(self, t_ns: int) -> list[Mover]:
         """Every tracked person predicted to ``t_ns``."""

@@ -3,7 +3,8 @@
 Data flow::
 
     camera tick:  JPEG per camera --> Localizer (detect, fuse) --> fixes
-                  segmentation per camera --> PersonDetector --> fused people --> PersonTracker
+                  JPEG (or segmentation, the oracle) per camera --> PersonDetector (robots'
+                  boxes at the last control tick removed) --> fused people --> PersonTracker
     control tick: Localizer.estimate --> poses --> Coordinator (who waits) --+
                   estimates, contacts, tracked people, plans --> SafetyMonitor -+--> Navigator per
                   robot (speed limits of both) --> (v, w) after the safety layer, per robot;
@@ -15,7 +16,7 @@ robots come from the localizer, people from the cameras' person detector.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -34,6 +35,7 @@ from simlan_data.algorithms.markers import MarkerMount
 from simlan_data.algorithms.navigation import Navigator
 from simlan_data.algorithms.occupancy import OccupancyGrid
 from simlan_data.algorithms.people import (
+    Footprint,
     PeopleParams,
     PersonDetection,
     PersonDetector,
@@ -116,6 +118,23 @@ def _marker_mounts(agents: list[AgentPlan]) -> list[MarkerMount]:
         for a in agents
         if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"
     ]
+
+
+def robot_footprints(agents: Iterable[AgentPlan]) -> dict[str, Footprint]:
+    """Every robot's and static agent's footprint: what the RGB person detector removes."""
+    return {a.namespace: a.kind.footprint_m for a in agents if a.kind.drive in ("diff", "static")}
+
+
+def robot_poses(
+    agents: Iterable[AgentPlan], last_known: Mapping[str, tuple[float, float, float]]
+) -> dict[str, tuple[float, float, float]]:
+    """Where GPSS believes each robot (its last valid estimate, else its spawn pose) and each
+    static agent (where it was placed)."""
+    return {
+        a.namespace: (last_known[a.namespace] if a.kind.drive == "diff" else a.pose)
+        for a in agents
+        if a.kind.drive in ("diff", "static")
+    }
 
 
 class GpssStack:
@@ -227,15 +246,19 @@ class GpssStack:
         self._cancelled: set[str] = set()
 
     def _build_person_detector(self, people: PeopleParams | None) -> None:
-        """Build the person detector and tracker (people carry no marker: GPSS finds them in segmentation)."""
+        """Build the person detector and tracker (people carry no marker: GPSS finds them in the
+        cameras' images, every robot's and static agent's body box removed: robot_boxes)."""
         self.people_params = people or PeopleParams(enabled=False)
         self.person_detector = (
-            PersonDetector(self.cameras, self.people_params)
+            PersonDetector(self.cameras, self.people_params, robot_footprints(self.agents.values()))
             if self.people_params.enabled and self.source == "camera" and self.walkers
             else None
         )
+        # where GPSS believed the robots at the last control tick (what the detector removes)
+        self._robot_poses = robot_poses(self.agents.values(), self.last_known)
         self.person_tracker = PersonTracker(self.people_params)
         self._people_frame: list[PersonDetection] = []
+        self._walked: list[tuple[float, float]] = []  # people who walked, at the last camera tick
         self.last_people: list[tuple[float, float]] | None = None  # fused at the last camera tick
 
     # ------------------------------------------------------------------------------- cameras
@@ -258,10 +281,24 @@ class GpssStack:
         self.localizer.observe_search(t_ns, camera_id, plan, found)
         return "full" if plan == "full" else "roi"
 
-    def people_frame(self, camera_id: str, labels: NDArray[np.uint8] | None) -> None:
-        """Let the person detector look at one camera's segmentation image."""
-        if self.person_detector is not None and labels is not None:
-            self._people_frame.extend(self.person_detector.detect(camera_id, labels))
+    @property
+    def people_reads(self) -> str | None:
+        """What the person detector reads: ``rgb`` (colour images), ``segmentation_oracle``
+        (segmentation images) or None (no detector)."""
+        return None if self.person_detector is None else self.person_detector.params.detector
+
+    def people_frame(
+        self, camera_id: str, labels: NDArray[np.uint8] | None, frame: CameraFrame | None = None
+    ) -> None:
+        """Let the person detector look at one camera's image (colour: ``frame``, decoded from the
+        recorded JPEG; segmentation: ``labels``), robots where GPSS believed them at the last
+        control tick."""
+        if self.person_detector is not None and camera_id in self.cameras:
+            bgr = None if frame is None else frame.bgr
+            found = self.person_detector.detect(
+                camera_id, labels=labels, bgr=bgr, robot_poses=self._robot_poses, people_xy=self._walked
+            )
+            self._people_frame.extend(found)
 
     def close_camera_tick(self, t_ns: int) -> None:
         if self.source == "camera" and self.searching:
@@ -273,6 +310,7 @@ class GpssStack:
             self.last_people = fuse_people(self._people_frame, self.people_params.cluster_m)
             self._people_frame = []
             self.person_tracker.update(t_ns, self.last_people)
+            self._walked = self.person_tracker.walked(t_ns)
 
     def robot_estimates(
         self, estimates: dict[str, PoseEstimate], truth: dict[str, tuple[float, float, float]]
@@ -329,6 +367,7 @@ class GpssStack:
         else:
             poses = {ns: truth[ns] for ns in self.navigators}
         self.last_known.update(poses)
+        self._robot_poses = robot_poses(self.agents.values(), self.last_known)
         return poses
 
     def _intents(

@@ -421,7 +421,7 @@ class Config:
     posemap: PosemapConfig = field(default_factory=PosemapConfig)
     perturbation: PerturbationConfig = field(default_factory=PerturbationConfig)
     faults: FaultsConfig = field(default_factory=FaultsConfig)
-    people: PeopleParams = field(default_factory=PeopleParams)  # person detection (the cameras' segmentation)
+    people: PeopleParams = field(default_factory=PeopleParams)  # person detection (rgb, or the oracle)
     collision: CollisionScenarioConfig = field(default_factory=CollisionScenarioConfig)
     live: LiveConfig = field(default_factory=LiveConfig)  # a live view in Foxglove (config/live.py)
     fleet: MissionsConfig = field(default_factory=MissionsConfig)  # scenario=fleet (config/missions.py)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from simlan_data.evaluation import (  # noqa: F401
     birdseye_replay,
     localization_replay,
+    people_replay,
     posemap_replay,
     replay,
     safety_replay,

@@ -469,13 +469,16 @@ class Simulation:
         stack, pub = run.stack, run.pub
         for f in frames:
             camera = f.camera
+            # (one decoded frame for the localizer and the RGB person detector: the recorded JPEG)
+            wants = stack.wants_frames(camera.camera_id) or stack.people_reads == "rgb"
+            frame = self._frame(f.stamp_ns, camera.camera_id, f.images, f.encoded) if wants else None
             if f.plan is not None and f.search is not None:
                 found = f.search.result()
                 mode = stack.camera_detections(f.stamp_ns, camera.camera_id, f.plan, found)
                 pub.detections(t, camera, found.detections, mode, stamp_ns=f.stamp_ns)
-            elif stack.wants_frames(camera.camera_id):
-                stack.camera_image(self._frame(f.stamp_ns, camera.camera_id, f.images, f.encoded))
-            stack.people_frame(camera.camera_id, f.images.labels)
+            elif frame is not None and stack.wants_frames(camera.camera_id):
+                stack.camera_image(frame)
+            stack.people_frame(camera.camera_id, f.images.labels, frame)
         stack.close_camera_tick(t)
         if stack.last_people is not None:
             pub.people(t, stack.last_people)
