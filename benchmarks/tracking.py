@@ -53,6 +53,14 @@ def one(root: Path, scenario: str, duration_s: float, seed: int, extra: list[str
     return out
 
 
+def _localizer(overrides: list[str]) -> str:
+    """The localizer a run steers on: the ``algorithms/localizer=NAME`` override's, else the marker one."""
+    chosen = [o.split("=", 1)[1] for o in overrides if o.startswith("algorithms/localizer=")]
+    return (
+        f"{chosen[-1]} (marker-free)" if chosen and chosen[-1] == "foreground" else (chosen or ["marker"])[-1]
+    )
+
+
 def _range(values: list[float]) -> str:
     return f"{min(values):.4f}-{max(values):.4f}"
 
@@ -86,7 +94,7 @@ def main() -> None:
         figures.append(
             {
                 "id": f"tracking_{space}_hota{suffix}",
-                "figure": f"marker localizer's tracking, {what}: HOTA / MOTA / IDF1 ({setup})",
+                "figure": f"{_localizer(args.override)} localizer's tracking, {what}: HOTA / MOTA / IDF1 ({setup})",
                 "value": f"{mean[f'{space}.hota']:.4f} / {mean[f'{space}.mota']:.4f} / {mean[f'{space}.idf1']:.4f}",
                 "unit": "",
                 "note": f"mean of {args.seeds} seeds; HOTA {_range(values['hota'])}, MOTA {_range(values['mota'])}, "
