@@ -27,7 +27,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any, ClassVar
 
 import cv2
@@ -35,16 +34,16 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
+from simlan_data.algorithms.background import background_dir, foreground_mask
 from simlan_data.algorithms.localization import Localizer, LocalizerParams, PoseEstimate
 from simlan_data.algorithms.localization_filter import PoseFix
 from simlan_data.algorithms.markers import MarkerMount
 from simlan_data.algorithms.roles import CameraFrame, LocalizerContext
-from simlan_data.constants import ASSETS_DIR, NS_PER_S
+from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError
 from simlan_data.geometry.camera import CameraModel
 from simlan_data.geometry.rotations import wrap_angle
 
-BACKGROUNDS_DIR = ASSETS_DIR / "backgrounds"  # <name>/<camera_id>.jpg: the empty warehouse
 DEFAULT_BACKGROUND = "gpss_960x540"
 KEY = "algorithms.localizer."
 COARSE = 4  # the cells' pixels are projected on a grid this much coarser, then interpolated
@@ -105,12 +104,6 @@ class ForegroundConfig(LocalizerParams):
             )
         object.__setattr__(self, "start_poses", tuple(float(v) for v in self.start_poses))
         object.__setattr__(self, "planes", tuple(float(v) for v in self.planes))
-
-
-def background_dir(name: str) -> Path:
-    """The plate folder ``name`` names: a path, or a packaged plate set's name."""
-    path = Path(name).expanduser()
-    return path if path.is_dir() else BACKGROUNDS_DIR / name
 
 
 def load_plates(name: str, cameras: Mapping[str, CameraModel]) -> dict[str, NDArray[np.uint8]]:
@@ -343,9 +336,9 @@ class ForegroundLocalizer:
 
     def foreground(self, frame: CameraFrame) -> NDArray[np.uint8]:
         """One image's foreground mask (1: differs from the plate), small specks removed."""
-        b, g, r = cv2.split(cv2.absdiff(frame.bgr, self.plates[frame.camera_id]))
-        _, mask = cv2.threshold(cv2.max(cv2.max(b, g), r), self.config.threshold, 1, cv2.THRESH_BINARY)
-        return np.asarray(cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)), dtype=np.uint8)
+        return foreground_mask(
+            frame.bgr, self.plates[frame.camera_id], self.config.threshold, normalize=False
+        )
 
     def observe(self, t_ns: int, frames: Mapping[str, CameraFrame]) -> None:
         """One camera tick: foreground, fusion per height, one fix per robot found."""
