@@ -215,7 +215,9 @@ def test_every_msg_parses_with_rosidl_as_the_recordings_embed_it(
 ) -> None:
     _require_system_module("rosidl_adapter", APT_CHECK)
     shipped = _shipped_texts()
-    assert len(shipped) == 14  # (issue 25 added InstanceTable, InstanceBoxes2D, InstanceBoxes3D, InstanceKeypoints)
+    assert (
+        len(shipped) == 14
+    )  # (issue 25 added InstanceTable, InstanceBoxes2D, InstanceBoxes3D, InstanceKeypoints)
     covered: set[str] = set()
     for bag in (short_run / "recording" / "recording.mcap", all_types_bag):
         embedded = _embedded(bag)
