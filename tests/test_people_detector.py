@@ -154,3 +154,20 @@ def test_what_stays_unchanged_joins_the_background_unless_protected() -> None:
     assert shares[0] == (6000, 1800) and shares[2] == (6000, 1800)
     assert shares[-1] == (0, 1800)  # absorbed after 3 unchanged frames following the first
     assert model.foreground(plate, protected).sum() == 0  # the patch gone: the plate again, no ghost
+
+
+def test_a_camera_without_a_plate_takes_its_first_frame_as_background() -> None:
+    """Cameras 500-503 have no packaged plate: the RGB detector starts from their first frame (no
+    error), and what changes afterwards is foreground."""
+    from simlan_data.algorithms.people import PeopleParams, PersonDetector
+    from simlan_data.geometry.calibration import load_calibration
+
+    cam = load_calibration(502).camera.scaled(480, 270)
+    detector = PersonDetector({"502": cam}, PeopleParams(detector="rgb"))
+    assert "502" not in detector.backgrounds  # no plate in gpss_960x540 for it
+    first = np.full((270, 480, 3), 90, np.uint8)
+    assert not detector.rgb_mask("502", first, {}).any()
+    later = first.copy()
+    later[100:160, 200:230] = 200  # something new in view
+    mask = detector.rgb_mask("502", later, {})
+    assert mask[110:150, 205:225].all() and mask.sum() <= 60 * 30

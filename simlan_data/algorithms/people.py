@@ -129,23 +129,14 @@ def segmentation_mask(labels: NDArray[np.uint8]) -> NDArray[np.uint8]:
 
 
 def load_person_plates(name: str, cameras: Mapping[str, CameraModel]) -> dict[str, NDArray[np.uint8]]:
-    """Each camera's background plate at its resolution; refused if one is missing.
-
-    Raises:
-        ConfigError: no plate for a camera (one line naming ``people.background`` and the fix).
-    """
+    """The background plates ``name`` has for ``cameras``, at their resolution (a camera without
+    one is left out: its first frame becomes its background, see ``PersonDetector.rgb_mask``)."""
     folder = background_dir(name)
     plates = {}
     for cid, cam in cameras.items():
         plate = read_plate(folder, cid, cam.width, cam.height)
-        if plate is None:
-            raise ConfigError.invalid(
-                "people.background",
-                name,
-                f"no plate {cid}.jpg or .png in {folder}",
-                "give a folder with one per camera, or use people.detector=segmentation_oracle",
-            )
-        plates[cid] = plate
+        if plate is not None:
+            plates[cid] = plate
     return plates
 
 
@@ -225,6 +216,15 @@ class PersonDetector:
         for x, y in people_xy:
             if (hull := self._box_hull(cam, (-r, r, -r, r), (x, y, 0.0), p.height_m + 0.2)) is not None:
                 cv2.fillConvexPoly(protected, hull, 1)
+        if camera_id not in self.backgrounds:  # no plate (another camera set): its first frame
+            self._checked.add(camera_id)  # (not compared with itself)
+            log.info(
+                "people: camera %s has no plate in people.background=%s: its first frame is its background "
+                "(what stands there then is found once it moves)",
+                camera_id,
+                p.background,
+            )
+            self.backgrounds[camera_id] = AdaptiveBackground(bgr.copy(), p.threshold, p.absorb_frames)
         mask = self.backgrounds[camera_id].foreground(bgr, protected)
         mask[robots > 0] = 0
         return mask
