@@ -186,6 +186,7 @@ def test_the_shipped_sweep_loads_and_lists() -> None:
     assert {e.name for e in safety.effects} == {"drops", "delay"}
 
 
+@pytest.mark.slow
 @pytest.mark.usefixtures("plugin_installed")  # (a clean checkout has the example plug-in only after this)
 def test_a_plug_in_localizer_gets_its_curve_from_the_same_command(tmp_path: Path) -> None:
     path = sweep_file(tmp_path, effects={"drops": {**EFFECTS["drops"], "values": [0.5]}})

@@ -100,6 +100,7 @@ def test_the_oracle_is_selectable_on_the_same_images(crossing_run: Path, tmp_pat
     assert 0 < m["replay.people.max_diff_to_live_m"] < 0.2
 
 
+@pytest.mark.slow
 def test_the_oracle_runs_live(tmp_path: Path) -> None:
     run = tmp_path / "run"
     proc = run_cli(

@@ -116,6 +116,7 @@ def _predicted(model: Path, landmarks: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------- the round trip
+@pytest.mark.slow
 def test_video_rendered_by_the_twin_drives_the_humanoid(
     mediapipe_python: str, one_camera_model: Path, tmp_path: Path
 ) -> None:
@@ -169,6 +170,7 @@ def test_video_rendered_by_the_twin_drives_the_humanoid(
 
 
 # ------------------------------------------------------------------------------ a photograph
+@pytest.mark.slow
 def test_photograph_and_image_folder_drive_the_humanoid(
     mediapipe_python: str, one_camera_model: Path, tmp_path: Path
 ) -> None:
@@ -263,6 +265,7 @@ def test_bad_source_is_one_line_exit_2_and_nothing_written(
     assert not (run / "recording").exists() and not (run / "metrics.json").exists()
 
 
+@pytest.mark.slow
 def test_source_needs_a_one_camera_model(trained: tuple[Path, Path], tmp_path: Path) -> None:
     _, four_cameras = trained
     photo = _write_png(tmp_path / "astronaut.png", skdata.astronaut())
@@ -274,6 +277,7 @@ def test_source_needs_a_one_camera_model(trained: tuple[Path, Path], tmp_path: P
     assert not (tmp_path / "run" / "recording").exists()
 
 
+@pytest.mark.slow
 def test_source_without_a_person_is_one_line(
     mediapipe_python: str, one_camera_model: Path, tmp_path: Path
 ) -> None:

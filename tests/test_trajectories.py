@@ -112,6 +112,7 @@ def test_the_replay_scores_the_localizer_against_the_tracker(made: Path) -> None
     assert replayed["replay.localization.max_diff_to_live_m"] == 0
 
 
+@pytest.mark.slow
 def test_the_real_example_runs(tmp_path: Path) -> None:
     proc = run_cli("experiment=trajectory", "progress=false", CAMERAS, f"hydra.run.dir={tmp_path / 'run'}")
     assert proc.returncode == 0, proc.stderr
