@@ -139,6 +139,7 @@ def test_ground_constraint_pose_against_an_opencv_reference(frames) -> None:
     assert checked >= 10
 
 
+@pytest.mark.slow
 def test_ground_constraint_beats_pnp_in_position(frames) -> None:
     cameras, images = frames
     ground = _observations(cameras, images, "ground")

@@ -194,6 +194,7 @@ def test_projection_estimator_output_is_mediapipe_shaped() -> None:
 
 
 # ------------------------------------------------------------------------------------- datasets
+@pytest.mark.slow
 def test_dataset_is_deterministic_per_seed(tmp_path: Path) -> None:
     digests = []
     for name, seed in (("a", 7), ("b", 7), ("c", 8)):

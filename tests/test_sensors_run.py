@@ -201,6 +201,7 @@ def brightness_and_settings(run: Path) -> list[tuple[float, float, float, float,
     return out
 
 
+@pytest.mark.slow
 def test_auto_exposure_restores_the_brightness_after_the_light_drops_exposure_first_then_gain(
     dimmed: dict[bool, Path],
 ) -> None:
@@ -219,6 +220,7 @@ def test_auto_exposure_restores_the_brightness_after_the_light_drops_exposure_fi
     assert exposure * gain * 0.125 == pytest.approx(1.0, rel=0.15)
 
 
+@pytest.mark.slow
 def test_cameras_whose_clocks_run_ahead_do_not_stop_the_robot(tmp_path: Path) -> None:
     """A camera clock ahead of the simulation stamps its images in the future: the fix is then
     just new, not 'never seen' (which stopped the robot for good before: seed 0's cameras 160/161
@@ -241,6 +243,7 @@ def test_cameras_whose_clocks_run_ahead_do_not_stop_the_robot(tmp_path: Path) ->
     assert metrics["safety.robot_agent_1.stops"] == 0
 
 
+@pytest.mark.slow
 def test_the_live_birdseye_view_survives_cameras_whose_first_frames_are_lost(tmp_path: Path) -> None:
     """With 90 % of frames lost some camera has delivered nothing when the stitcher first runs:
     it gets black for that camera (a KeyError ended the run before)."""

@@ -225,7 +225,7 @@ def generate_missions(
     need = max(widest + MARGIN_M, planner_m)
     spots = _spots(grid, clearance, need, spec.area_m)
     if cameras:  # spots where the cameras see the robots (the floor between them need not be)
-        seen = _seen(grid, clearance >= need, cameras, kinds, spec.area_m)
+        seen = _seen_cached(grid, need, clearance, cameras, kinds, spec.area_m)
         spots = spots[[bool(seen[grid.to_cell(xy)]) for xy in spots[:, :2]]]
     rng = np.random.default_rng([seed, 23])  # (23: the issue; any constant keeps seeds independent)
     taken: list[tuple[float, float, float]] = []
@@ -293,6 +293,35 @@ def generate_missions(
 SEEN_STEP_CELLS = 2  # the cameras' view is tested on every 2nd cell (0.2 m at the default resolution)
 SEEN_YAWS = 8  # headings tested per cell
 SEEN_SHARE = 0.5  # seen at this share of them at least
+
+
+_SEEN: dict[tuple[Any, ...], NDArray[np.bool_]] = {}  # the cameras' view does not depend on the seed
+
+
+def _seen_cached(
+    grid: OccupancyGrid,
+    need_m: float,
+    clearance: NDArray[np.float32],
+    cameras: tuple[CameraModel, ...],
+    kinds: list[AgentType],
+    area: list[float],
+) -> NDArray[np.bool_]:
+    """``_seen`` of the cells with ``need_m`` clearance, computed once per layout grid, cameras,
+    marker mounts and area (every seed of a sweep asks the same)."""
+    key = (
+        grid.origin_xy_m,
+        grid.resolution_m,
+        hash(grid.occupied.tobytes()),
+        round(need_m, 6),
+        tuple((c.camera_id, c.width, c.height, tuple(np.round(c.position, 6))) for c in cameras),
+        tuple(sorted({k.marker_xyz for k in kinds if k.marker_xyz is not None})),
+        tuple(area),
+    )
+    if key not in _SEEN:
+        if len(_SEEN) > 8:
+            _SEEN.clear()
+        _SEEN[key] = _seen(grid, clearance >= need_m, cameras, kinds, area)
+    return _SEEN[key]
 
 
 def _seen(
