@@ -30,6 +30,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -311,7 +312,7 @@ def _seen_cached(
     key = (
         grid.origin_xy_m,
         grid.resolution_m,
-        hash(grid.occupied.tobytes()),
+        zlib.crc32(grid.occupied.tobytes()),
         round(need_m, 6),
         tuple((c.camera_id, c.width, c.height, tuple(np.round(c.position, 6))) for c in cameras),
         tuple(sorted({k.marker_xyz for k in kinds if k.marker_xyz is not None})),
