@@ -129,6 +129,12 @@ def test_robots_that_steer_on_the_cameras_start_and_stop_where_the_cameras_see_t
     cfg = compose_config(["scenario=fleet", "seed=0"])
     spots = {tuple(a.pose[:2]) for a in cfg.agent_list} | {tuple(g) for a in cfg.agent_list for g in a.goals}
     assert min(_seen_share(cfg, xy) for xy in spots) >= 0.5
+    cams = {
+        str(i): load_calibration(i).camera.scaled(cfg.cameras.width, cfg.cameras.height)
+        for i in cfg.cameras.ids
+    }
+    for a in cfg.agent_list:  # and each robot is seen at its start, facing as it spawns
+        assert Visibility(cams, AGENT_TYPES[a.type]).in_view(*a.pose), a.namespace
     free = compose_config(["scenario=fleet", "seed=0", "localization.source=ground_truth"])
     spots = {tuple(a.pose[:2]) for a in free.agent_list} | {
         tuple(g) for a in free.agent_list for g in a.goals

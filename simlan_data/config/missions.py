@@ -272,7 +272,7 @@ def generate_missions(
                 ]
         if goals[-1] != list(home):
             goals.append(list(home))
-        yaw = round(float(rng.uniform(-math.pi, math.pi)), 4)
+        yaw = round(_seen_heading(float(rng.uniform(-math.pi, math.pi)), home, kind, cameras), 4)
         agents[f"robot_agent_{i + 1}"] = {
             "type": kind.name,
             "pose": [home[0], home[1], yaw],
@@ -356,6 +356,19 @@ def _seen(
             inside = (r < rows) & (c < cols)
             seen[r[inside], c[inside]] = True
     return seen
+
+
+def _seen_heading(
+    yaw: float, xy: tuple[float, float], kind: AgentType, cameras: tuple[CameraModel, ...]
+) -> float:
+    """``yaw``, or where a camera does not see the robot's marker at its home facing so, the
+    nearest of 16 headings at which one does (a robot not seen at the start is never localized)."""
+    if not cameras or kind.marker_xyz is None:
+        return yaw
+    turns = np.array([0.0, *[s * k * math.pi / 8 for k in range(1, 9) for s in (1, -1)]])
+    poses = np.column_stack([np.full((len(turns), 2), xy), yaw + turns])
+    seen = markers_in_view(cameras, kind.marker_xyz, poses, size_m=MARKER_SIZE_M)
+    return float(math.remainder(yaw + turns[int(np.argmax(seen))], 2 * math.pi)) if seen.any() else yaw
 
 
 def _walkable(
