@@ -153,19 +153,29 @@ def _floor(layout: str, fidelity: str, resolution_m: float) -> tuple[OccupancyGr
     return grid, grid.clearance_m()
 
 
+def _in_area(xy: NDArray[np.float64], area: list[float]) -> NDArray[np.bool_]:
+    """Which points ``xy`` (..., 2) lie in ``area`` (x0, x1, y0, y1; edges included)."""
+    x, y = xy[..., 0], xy[..., 1]
+    return np.asarray((x >= area[0]) & (x <= area[1]) & (y >= area[2]) & (y <= area[3]), dtype=bool)
+
+
+def _largest_region(free: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """(N, 2) cells of the largest 8-connected region of ``free`` (none when nothing is free)."""
+    count, labels = cv2.connectedComponents(free.astype(np.uint8), connectivity=8)
+    if count < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    largest = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1  # (label 0: not free)
+    return np.argwhere(labels == largest)
+
+
 def _spots(
     grid: OccupancyGrid, clearance: NDArray[np.float32], need_m: float, area: list[float]
 ) -> NDArray[np.float64]:
     """(N, 3) x, y, clearance of the cells in ``area`` with ``need_m`` clearance, in the largest
     connected region of such floor (over the whole map: a region may leave the area between spots)."""
-    free = clearance >= need_m
-    count, labels = cv2.connectedComponents(free.astype(np.uint8), connectivity=8)
-    if count < 2:
-        return np.zeros((0, 3))
-    largest = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1  # (label 0: the obstacles)
-    cells = np.argwhere(labels == largest)
+    cells = _largest_region(clearance >= need_m)
     xy = grid.to_xy(cells)
-    inside = (xy[:, 0] >= area[0]) & (xy[:, 0] <= area[1]) & (xy[:, 1] >= area[2]) & (xy[:, 1] <= area[3])
+    inside = _in_area(xy, area)
     return np.column_stack([xy[inside], clearance[cells[inside, 0], cells[inside, 1]]])
 
 
@@ -339,7 +349,7 @@ def _seen(
     rows, cols = grid.occupied.shape
     coarse = np.argwhere(free[::SEEN_STEP_CELLS, ::SEEN_STEP_CELLS]) * SEEN_STEP_CELLS
     xy = grid.to_xy(coarse)
-    keep = (xy[:, 0] >= area[0]) & (xy[:, 0] <= area[1]) & (xy[:, 1] >= area[2]) & (xy[:, 1] <= area[3])
+    keep = _in_area(xy, area)
     coarse, xy = coarse[keep], xy[keep]
     ok = np.ones(len(xy), dtype=bool)
     yaws = np.linspace(-math.pi, math.pi, SEEN_YAWS, endpoint=False)
@@ -379,16 +389,8 @@ def _walkable(
     the cells outside the area."""
     rows, cols = np.indices(clearance.shape)
     xy = grid.to_xy(np.column_stack([rows.ravel(), cols.ravel()])).reshape(*clearance.shape, 2)
-    outside = (
-        (xy[..., 0] < area[0]) | (xy[..., 0] > area[1]) | (xy[..., 1] < area[2]) | (xy[..., 1] > area[3])
-    )
-    count, labels = cv2.connectedComponents(
-        ((clearance >= need_m) & ~outside).astype(np.uint8), connectivity=8
-    )
-    if count < 2:
-        return np.zeros((0, 3)), outside
-    largest = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1
-    cells = np.argwhere(labels == largest)
+    outside = ~_in_area(xy, area)
+    cells = _largest_region((clearance >= need_m) & ~outside)
     return np.column_stack([grid.to_xy(cells), clearance[cells[:, 0], cells[:, 1]]]), outside
 
 
