@@ -18,13 +18,16 @@ and the renderer is deterministic. Writes into the run directory ``dataset.parqu
 from __future__ import annotations
 
 import logging
+import os
 import tempfile
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 from tqdm import tqdm
 
 from simlan_data.algorithms.posemap.dataset import PoseDataset, write_dataset
@@ -36,9 +39,10 @@ from simlan_data.geometry.camera import CameraModel
 from simlan_data.imaging.image_files import write_image
 from simlan_data.metrics_io import write_metrics
 from simlan_data.sim.agents import spawn_agent
+from simlan_data.sim.dynamic_layer import StaticMeshes
 from simlan_data.sim.humanoid import PosedHumanoidAgent
 from simlan_data.sim.pybullet_client import Client, connect
-from simlan_data.sim.rendering import CameraRenderer, LabelTable
+from simlan_data.sim.rendering import Aabb, CameraRenderer, LabelTable
 from simlan_data.sim.scene import load_cameras
 from simlan_data.world._pybullet import pb
 from simlan_data.world.agent_types import AGENT_TYPES
@@ -77,6 +81,8 @@ class CaptureRig:
                 world = build_world(cid, placements, {}, mesh_dir=Path(mesh_dir))
             for body, label in world.labels.items():
                 labels.set(body, label)
+            self.crop_margin = pm.crop_margin if pm.crop == "person" else None
+            self._last_box: Aabb | None = None
             self.renderers: list[CameraRenderer] = []
             if need_images:
                 self.renderers = [
@@ -93,6 +99,8 @@ class CaptureRig:
                 ]
                 for r in self.renderers:  # the warehouse without the humanoid, once
                     r.render_static()
+                # then only the humanoid is drawn: a region render costs per mesh in the client
+                StaticMeshes(cid, world, labels).remove()
             agent = spawn_agent(
                 cid, pm.namespace, AGENT_TYPES["posed_humanoid"], pose=list(pm.position), marker_id=None
             )
@@ -109,10 +117,17 @@ class CaptureRig:
         world = self.humanoid.landmarks_world()
         if self.renderers:
             box = self.humanoid.aabb()
+            # where the body was too: the last pose's pixels outside this box must go (a sample's
+            # images thus depend on the sample before it too: a region spanning two poses
+            # rasterizes a few edge pixels differently; a pool worker renders the sample before
+            # its first, so every worker count gives the same images)
+            moved = [box] if self._last_box is None else [self._last_box, box]
+            self._last_box = box
             out = []
             for r in self.renderers:
-                images = r.render([box])
-                out.append(CameraView(r.camera, images.rgb, images.depth_m, world))
+                images = r.render(moved)
+                crop = None if self.crop_margin is None else person_crop(r.camera, box, self.crop_margin)
+                out.append(CameraView(r.camera, images.rgb, images.depth_m, world, crop=crop))
             return out
         if rays:
             return [self._ray_view(cam, world) for cam in self.cameras]
@@ -133,6 +148,26 @@ class CaptureRig:
         self.client.disconnect()
 
 
+def person_crop(cam: CameraModel, box: Aabb, margin: float) -> tuple[int, int, int, int] | None:
+    """Image rectangle (u0, v0, u1, v1) around the body's box, ``margin`` x its larger side added on
+    every side; None when no part of the box is in front of the camera (the full image is used)."""
+    lo, hi = np.asarray(box[0], dtype=float), np.asarray(box[1], dtype=float)
+    t = np.linspace(0.0, 1.0, 5)  # a grid on the box: its distorted image bends
+    grid = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
+    uv, ok = cam.project(lo + grid * (hi - lo))
+    if not ok.any():  # (points beyond the lens's valid radius lie outside the image)
+        return None
+    (u0, v0), (u1, v1) = uv[ok].min(axis=0), uv[ok].max(axis=0)
+    pad = margin * max(u1 - u0, v1 - v0)
+    rect = (
+        max(0, int(np.floor(u0 - pad))),
+        max(0, int(np.floor(v0 - pad))),
+        min(cam.width, int(np.ceil(u1 + pad))),
+        min(cam.height, int(np.ceil(v1 + pad))),
+    )
+    return rect if rect[2] - rect[0] >= 2 and rect[3] - rect[1] >= 2 else None
+
+
 def _draw(rgb: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     img = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
     h, w = img.shape[:2]
@@ -143,42 +178,53 @@ def _draw(rgb: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     return img
 
 
+@dataclass
+class Chunk:
+    """What one worker measured of consecutive samples."""
+
+    measured: NDArray[np.float64]  # (n, cameras, 33, 4): the estimator's measure(), before finish()
+    images: list[list[NDArray[np.uint8]]]  # per camera, of those samples below posemap.save_images
+    renderer: str
+    version: str
+    setup_s: float
+
+
 def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> dict[str, float]:
     """Generate ``posemap.samples`` samples into ``run_dir``; returns the metrics written."""
     pm = cfg.posemap
-    estimator = _make_estimator(cfg)
-    rays = pm.estimator == "projection" and pm.occlusion == "rays"
-    t0 = time.perf_counter()
-    rig = CaptureRig(cfg, need_images=not rays)
-    setup_s = time.perf_counter() - t0
+    _check_estimator(cfg)
+    cfg = replace(cfg, posemap=replace(pm, mediapipe_python=str(Path(pm.mediapipe_python).absolute())))
     rng = np.random.default_rng(cfg.seed)
     q_all = sample_joints(rng, pm.samples, limit_scale=pm.limit_scale)
-    lm = np.zeros((pm.samples, len(rig.cameras), NUM_LANDMARKS, 4), dtype=np.float32)
-    t1 = time.perf_counter()
-    try:
-        with estimator:
-            _capture(cfg, rig, estimator, q_all, lm, run_dir / "images", rays=rays, progress=progress)
-    finally:
-        rig.close()
-    loop_s = time.perf_counter() - t1
+    workers = min(pm.workers or os.cpu_count() or 1, pm.samples)
+    t0 = time.perf_counter()
+    if workers == 1:
+        chunks = [capture_chunk(cfg, q_all, 0, progress=progress)]
+    else:
+        chunks = _capture_pool(cfg, q_all, workers, progress=progress)
+    wall_s = time.perf_counter() - t0
+    cameras = load_cameras(cfg)[0]
+    lm = _finish(cfg, np.concatenate([c.measured for c in chunks]), cameras)
+    _save_images(run_dir / "images", [tiles for c in chunks for tiles in c.images], lm)
+    setup_s = float(np.mean([c.setup_s for c in chunks]))
     data = PoseDataset(
         np.arange(pm.samples),
-        [c.camera_id for c in rig.cameras],
+        [c.camera_id for c in cameras],
         lm,
         q_all,
-        estimator.name,
-        _meta(cfg, rig, estimator, rays),
+        pm.estimator,
+        _meta(cfg, cameras, chunks[0]),
     )
     digest = write_dataset(run_dir, data)
-    metrics = _dataset_metrics(cfg, rig, lm, loop_s, setup_s)
+    metrics = _dataset_metrics(cfg, cameras, lm, wall_s, setup_s, workers)
     write_metrics(run_dir / METRICS_FILENAME, metrics)
     log.info(
         "\n".join(
             [
-                f"simlan_data: posemap dataset ({estimator.name}) finished",
+                f"simlan_data: posemap dataset ({pm.estimator}) finished",
                 f"  run directory  {run_dir}",
-                f"  dataset        {run_dir / 'dataset.parquet'}  ({pm.samples} samples x {len(rig.cameras)} cameras, sha256 {digest[:12]})",
-                f"  speed          {metrics['posemap.dataset.samples_per_s']:.1f} samples/s ({loop_s:.1f} s, setup {setup_s:.1f} s)",
+                f"  dataset        {run_dir / 'dataset.parquet'}  ({pm.samples} samples x {len(cameras)} cameras, sha256 {digest[:12]})",
+                f"  speed          {metrics['posemap.dataset.samples_per_s']:.1f} samples/s with {workers} worker(s) ({wall_s:.1f} s, setup {setup_s:.1f} s)",
                 f"  landmarks      {metrics['posemap.dataset.visible_fraction'] * 100:.1f} % visible, person found in {metrics['posemap.dataset.detected_fraction'] * 100:.1f} % of the views",
                 f"  next           python -m simlan_data.run experiment=posemap_train posemap.dataset={run_dir}",
             ]
@@ -187,16 +233,18 @@ def generate_dataset(cfg: Config, run_dir: Path, *, progress: bool = True) -> di
     return metrics
 
 
-def _make_estimator(cfg: Config) -> PoseEstimator:
-    """Check the estimator and occlusion settings and build the estimator."""
-    pm = cfg.posemap
-    if pm.estimator == "mediapipe" and pm.occlusion == "rays":
+def _check_estimator(cfg: Config) -> None:
+    if cfg.posemap.estimator == "mediapipe" and cfg.posemap.occlusion == "rays":
         raise ConfigError(
             "invalid posemap.occlusion='rays'",
             "config",
             "MediaPipe needs rendered images",
             "use posemap.occlusion=depth",
         )
+
+
+def _make_estimator(cfg: Config) -> PoseEstimator:
+    pm = cfg.posemap
     return make_estimator(
         pm.estimator,
         seed=cfg.seed + 1,
@@ -206,63 +254,140 @@ def _make_estimator(cfg: Config) -> PoseEstimator:
     )
 
 
-def _capture(
+def capture_chunk(
     cfg: Config,
-    rig: CaptureRig,
-    estimator: PoseEstimator,
-    q_all: np.ndarray,
-    lm: np.ndarray,
-    image_dir: Path,
+    q: NDArray[np.float64],
+    first: int,
     *,
-    rays: bool,
-    progress: bool,
-) -> None:
-    """Pose the humanoid for every sample, estimate its landmarks into ``lm``; save the first images."""
+    before: NDArray[np.float64] | None = None,
+    progress: bool = False,
+) -> Chunk:
+    """Pose the humanoid at each of ``q`` (samples ``first``, ``first + 1``, ...) and measure its
+    landmarks, in this process: the run's own or a pool worker's (its own renderer and estimator).
+    ``before``: the sample before ``first``, rendered first as the serial run did."""
     pm = cfg.posemap
-    for i in tqdm(
-        range(pm.samples), desc="posemap dataset", unit="sample", disable=None if progress else True
-    ):
-        views = rig.views(q_all[i], rays=rays)
-        lm[i] = estimator.estimate(views)
-        if i < pm.save_images and views[0].rgb is not None:
-            image_dir.mkdir(parents=True, exist_ok=True)
-            tiles = [_draw(v.rgb, lm[i, k]) for k, v in enumerate(views) if v.rgb is not None]
-            write_image(image_dir / f"sample_{i:05d}.png", np.hstack(tiles))
+    rays = pm.estimator == "projection" and pm.occlusion == "rays"
+    t0 = time.perf_counter()
+    estimator = _make_estimator(cfg)
+    try:
+        rig = CaptureRig(cfg, need_images=not rays)
+    except BaseException:
+        estimator.close()
+        raise
+    setup_s = time.perf_counter() - t0
+    measured = np.zeros((len(q), len(rig.cameras), NUM_LANDMARKS, 4))
+    images: list[list[NDArray[np.uint8]]] = []
+    try:
+        with estimator:
+            if before is not None:
+                rig.views(before, rays=rays)
+            bar = tqdm(
+                range(len(q)), desc="posemap dataset", unit="sample", disable=None if progress else True
+            )
+            for j in bar:
+                views = rig.views(q[j], rays=rays)
+                measured[j] = estimator.measure(views)
+                if first + j < pm.save_images and views[0].rgb is not None:
+                    images.append([v.rgb.copy() for v in views if v.rgb is not None])
+    finally:
+        rig.close()
+    renderer = "none (ray casts)" if rays else rig.client.backend
+    return Chunk(measured, images, renderer, estimator.version, setup_s)
 
 
-def _meta(cfg: Config, rig: CaptureRig, estimator: PoseEstimator, rays: bool) -> dict[str, Any]:
-    """Describe how the dataset was made (seed, occlusion, noise, renderer, cameras)."""
+def _capture_pool(cfg: Config, q_all: NDArray[np.float64], workers: int, *, progress: bool) -> list[Chunk]:
+    """Consecutive slices of the samples, one per worker (loky: this machine; ray: a cluster)."""
+    from joblib import Parallel, delayed, parallel_config
+
+    parts = np.array_split(np.arange(len(q_all)), workers)
+    jobs = [
+        delayed(capture_chunk)(cfg, q_all[idx], int(idx[0]), before=q_all[idx[0] - 1] if idx[0] else None)
+        for idx in parts
+    ]
+    if cfg.posemap.pool == "ray":
+        _start_ray(cfg.posemap.ray_address)
+        with parallel_config(backend="ray", n_jobs=workers):  # (its backend returns lists only)
+            return list(Parallel()(jobs))
+    results = Parallel(n_jobs=workers, backend="loky", return_as="generator")(jobs)
+    return list(tqdm(results, total=workers, desc="posemap dataset (workers)", unit="slice",
+                     disable=None if progress else True))  # fmt: skip
+
+
+def _start_ray(address: str) -> None:
+    """Connect to (or start) the Ray cluster and register its joblib backend."""
+    try:
+        import ray
+        from ray.util.joblib import register_ray
+    except ImportError as err:
+        raise ConfigError(
+            "posemap.pool=ray needs Ray",
+            "posemap.pool",
+            f"cannot import it ({err})",
+            "pip install -e '.[ray]', or use posemap.pool=loky",
+        ) from err
+    register_ray()
+    if not ray.is_initialized():
+        ray.init(address=address or None, log_to_driver=False)
+
+
+def _finish(cfg: Config, measured: NDArray[np.float64], cameras: list[CameraModel]) -> NDArray[np.float32]:
+    """The seeded last step of the estimator (the projection's noise), sample after sample."""
+    if cfg.posemap.estimator != "projection":
+        return measured.astype(np.float32)
+    estimator = _make_estimator(cfg)
+    return (
+        np.stack([estimator.finish(m, cameras) for m in measured])
+        if len(measured)
+        else measured.astype(np.float32)
+    )
+
+
+def _save_images(image_dir: Path, samples: list[list[NDArray[np.uint8]]], lm: NDArray[np.float32]) -> None:
+    """The first samples' camera images side by side, their landmarks drawn."""
+    for i, views in enumerate(samples):
+        image_dir.mkdir(parents=True, exist_ok=True)
+        tiles = [_draw(rgb, lm[i, k]) for k, rgb in enumerate(views)]
+        write_image(image_dir / f"sample_{i:05d}.png", np.hstack(tiles))
+
+
+def _meta(cfg: Config, cameras: list[CameraModel], chunk: Chunk) -> dict[str, Any]:
+    """Describe how the dataset was made (seed, occlusion, noise, renderer, crop, cameras)."""
     pm = cfg.posemap
+    rays = pm.estimator == "projection" and pm.occlusion == "rays"
+    projection = pm.estimator == "projection"
     return {
         "seed": cfg.seed,
         "limit_scale": pm.limit_scale,
-        "occlusion": "rays" if rays else ("depth" if pm.estimator == "projection" else "n/a"),
-        "noise_px": pm.noise_px if pm.estimator == "projection" else None,
-        "hidden_noise_px": pm.hidden_noise_px if pm.estimator == "projection" else None,
-        "estimator_version": getattr(estimator, "version", ""),
+        "occlusion": "rays" if rays else ("depth" if projection else "n/a"),
+        "noise_px": pm.noise_px if projection else None,
+        "hidden_noise_px": pm.hidden_noise_px if projection else None,
+        "crop": None if projection else (pm.crop if pm.crop == "full" else f"person+{pm.crop_margin:g}"),
+        "estimator_version": chunk.version,
         "position": list(pm.position),
-        "renderer": rig.client.backend if not rays else "none (ray casts)",
+        "renderer": chunk.renderer,
         "image_size": [cfg.cameras.width, cfg.cameras.height],
         "world_fidelity": cfg.world.fidelity,
-        "camera_models": [camera_meta(c) for c in rig.cameras],
+        "camera_models": [camera_meta(c) for c in cameras],
     }
 
 
 def _dataset_metrics(
-    cfg: Config, rig: CaptureRig, lm: np.ndarray, loop_s: float, setup_s: float
+    cfg: Config, cameras: list[CameraModel], lm: np.ndarray, wall_s: float, setup_s: float, workers: int
 ) -> dict[str, float]:
-    """Measure the dataset: size, speed, visible and detected fractions (overall and per camera)."""
+    """Measure the dataset: size, speed (the workers' setup left out), visible and detected fractions."""
     pm = cfg.posemap
     visible = lm[..., 3] > 0.5
+    loop_s = wall_s - setup_s
     metrics: dict[str, float] = {
         "posemap.dataset.samples": float(pm.samples),
-        "posemap.dataset.cameras": float(len(rig.cameras)),
+        "posemap.dataset.cameras": float(len(cameras)),
+        "posemap.dataset.workers": float(workers),
         "posemap.dataset.samples_per_s": pm.samples / loop_s if loop_s > 0 else 0.0,
-        "posemap.dataset.wall_s": loop_s,
+        "posemap.dataset.wall_s": wall_s,
         "posemap.dataset.setup_s": setup_s,
         "posemap.dataset.visible_fraction": float(visible.mean()),
         "posemap.dataset.detected_fraction": float((lm[..., 3] > 0).any(axis=2).mean()),
     }
-    for k, cam in enumerate(rig.cameras):
+    for k, cam in enumerate(cameras):
         metrics[f"posemap.dataset.visible_fraction.{cam.camera_id}"] = float(visible[:, k].mean())
     return metrics

@@ -20,6 +20,8 @@ MODELS = ("mlp", "fusion", "gbm")
 FEATURES = ("image", "rig")
 LOSSES = ("auto", "mse", "l1")
 REFINES = ("none", "fit")
+CROPS = ("person", "full")
+POOLS = ("loky", "ray")
 
 
 def _bad(key: str, value: Any, why: str, fix: str) -> ConfigError:
@@ -42,6 +44,11 @@ class PosemapConfig:
     position: list[float] = field(default_factory=lambda: [5.3, -10.0, 0.0])  # support-arm base x, y, yaw
     mediapipe_python: str = ".venv-mediapipe/bin/python"
     save_images: int = 0  # keep the first N samples' camera images (PNG, landmarks drawn)
+    crop: str = "person"  # MediaPipe sees: person (the body's projected box + crop_margin) | full (the image)
+    crop_margin: float = 0.25  # added on every side of the person crop, x the box's larger side
+    workers: int = 1  # worker processes, each with its own renderer and estimator; 0: one per core
+    pool: str = "loky"  # workers on: loky (this machine's cores, joblib) | ray (a Ray cluster, ray_address)
+    ray_address: str = ""  # pool=ray: the cluster ("auto": the one `ray start` made; "": a local one)
     # --- training (task=train)
     dataset: str = ""  # dataset run directory or its dataset.parquet
     model: str = "fusion"  # mlp (SIMLAN's baseline, one camera) | fusion (all cameras) | gbm
@@ -173,6 +180,16 @@ class PosemapConfig:
                 f"posemap.drive={self.drive} is set too: the humanoid follows one source",
                 "give posemap.source (images, video) or posemap.drive (landmarks), not both",
             )
+        if self.crop not in CROPS:
+            raise _bad("crop", self.crop, f"expected one of {', '.join(CROPS)}", "use person")
+        if not (math.isfinite(self.crop_margin) and 0 <= self.crop_margin <= 2):
+            raise _bad(
+                "crop_margin", self.crop_margin, "must be within 0..2 (x the box's larger side)", "use 0.25"
+            )
+        if not 0 <= self.workers <= 1024:
+            raise _bad("workers", self.workers, "must be within 0..1024 (0: one per core)", "use 1, or 0")
+        if self.pool not in POOLS:
+            raise _bad("pool", self.pool, f"expected one of {', '.join(POOLS)}", "use loky")
         if not 1 <= self.threads <= 64:
             raise _bad("threads", self.threads, "must be within 1..64", "use 2")
 

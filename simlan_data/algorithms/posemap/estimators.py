@@ -36,6 +36,7 @@ from simlan_data.world.skeleton import LANDMARK_INSIDE_M, LANDMARK_NAMES, NUM_LA
 ESTIMATORS = ("projection", "mediapipe")
 LEFT_HIP, RIGHT_HIP = LANDMARK_NAMES.index("left_hip"), LANDMARK_NAMES.index("right_hip")
 WORKER = Path(__file__).with_name("mediapipe_worker.py")
+PIPE_WINDOW = 8  # images sent ahead of their answers (an answer is about 3 kB of JSON)
 
 
 @dataclass
@@ -49,15 +50,32 @@ class CameraView:
     depth_m: NDArray[np.float32] | None = None
     landmarks_world: NDArray[np.float64] | None = None
     hidden: NDArray[np.bool_] | None = None
+    # (u0, v0, u1, v1): the person's region of ``rgb``; MediaPipe looks at it alone (None: all)
+    crop: tuple[int, int, int, int] | None = None
 
 
 class PoseEstimator(ABC):
-    """Landmarks of the person in each view: (n_views, 33, 4) float32, MediaPipe's layout."""
+    """Landmarks of the person in each view: (n_views, 33, 4) float32, MediaPipe's layout.
+
+    In two steps, so that a pool of workers can measure samples in any order and the dataset stays
+    the same: :meth:`measure` depends on the views alone; :meth:`finish` (the seeded noise) runs
+    in the parent, sample after sample.
+    """
 
     name: str = ""
+    version: str = ""
 
     @abstractmethod
-    def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]: ...
+    def measure(self, views: Sequence[CameraView]) -> NDArray[np.float64]:
+        """The views' landmarks before :meth:`finish`: (n_views, 33, 4)."""
+
+    def finish(self, measured: NDArray[np.float64], cameras: Sequence[CameraModel]) -> NDArray[np.float32]:
+        """The landmarks of one sample's measurement (the default: as measured)."""
+        del cameras  # (the projection estimator's noise needs them)
+        return measured.astype(np.float32)
+
+    def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]:
+        return self.finish(self.measure(views), [v.camera for v in views])
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release resources (worker processes)."""
@@ -100,8 +118,9 @@ class ProjectionEstimator(PoseEstimator):
         seen[inside] = view.depth_m[row[inside], col[inside]]
         return inside & (seen > 0) & (z_m - seen <= LANDMARK_INSIDE_M + self.depth_tolerance_m)
 
-    def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]:
-        out = np.zeros((len(views), NUM_LANDMARKS, 4), dtype=np.float32)
+    def measure(self, views: Sequence[CameraView]) -> NDArray[np.float64]:
+        """Per view: pixel u, v, MediaPipe's z (noise-free) and visibility; NaN where nothing is seen."""
+        out = np.full((len(views), NUM_LANDMARKS, 4), np.nan)
         for i, view in enumerate(views):
             if view.landmarks_world is None:
                 raise ValueError("the projection estimator needs the landmarks' world positions")
@@ -111,12 +130,23 @@ class ProjectionEstimator(PoseEstimator):
             vis = self.visible(view, uv, pts[:, 2], ok)
             if not vis.any():
                 continue
-            sigma = np.where(vis, self.noise_px, self.hidden_noise_px)[:, None]
-            uv = uv + self.rng.normal(size=uv.shape) * sigma
             hips_z = 0.5 * (pts[LEFT_HIP, 2] + pts[RIGHT_HIP, 2])
             # MediaPipe's z: relative to the hips' midpoint, in image-width units like x
-            z = (pts[:, 2] - hips_z) * cam.K[0, 0] / (max(hips_z, 1e-6) * cam.width)
-            z = z + self.rng.normal(size=z.shape) * self.z_noise
+            out[i, :, :2] = uv
+            out[i, :, 2] = (pts[:, 2] - hips_z) * cam.K[0, 0] / (max(hips_z, 1e-6) * cam.width)
+            out[i, :, 3] = vis
+        return out
+
+    def finish(self, measured: NDArray[np.float64], cameras: Sequence[CameraModel]) -> NDArray[np.float32]:
+        """Pixel noise (seeded, drawn view after view) and MediaPipe's normalised coordinates."""
+        out = np.zeros((len(cameras), NUM_LANDMARKS, 4), dtype=np.float32)
+        for i, cam in enumerate(cameras):
+            if np.isnan(measured[i, 0, 0]):
+                continue
+            vis = measured[i, :, 3] > 0.5
+            sigma = np.where(vis, self.noise_px, self.hidden_noise_px)[:, None]
+            uv = measured[i, :, :2] + self.rng.normal(size=(NUM_LANDMARKS, 2)) * sigma
+            z = measured[i, :, 2] + self.rng.normal(size=NUM_LANDMARKS) * self.z_noise
             out[i, :, 0] = uv[:, 0] / cam.width
             out[i, :, 1] = uv[:, 1] / cam.height
             out[i, :, 2] = z
@@ -170,29 +200,48 @@ class MediaPipeEstimator(PoseEstimator):
             raise RunError("MediaPipe worker stopped", str(WORKER), tail, "run the worker by hand to see why")
         return dict(json.loads(line))
 
-    def estimate(self, views: Sequence[CameraView]) -> NDArray[np.float32]:
-        images = [view.rgb for view in views]
-        if any(rgb is None for rgb in images):
+    def measure(self, views: Sequence[CameraView]) -> NDArray[np.float64]:
+        """MediaPipe on each view's person crop (or whole image), in full-image coordinates."""
+        if any(view.rgb is None for view in views):
             raise ValueError("the MediaPipe estimator needs the RGB image")
-        return self.estimate_images(images)  # type: ignore[arg-type]
+        crops = [view.crop or (0, 0, view.rgb.shape[1], view.rgb.shape[0]) for view in views]  # type: ignore[union-attr]
+        images = [view.rgb[v0:v1, u0:u1] for view, (u0, v0, u1, v1) in zip(views, crops)]  # type: ignore[index]
+        out = self.estimate_images(images).astype(np.float64)
+        for lm, view, (u0, v0, u1, v1) in zip(out, views, crops):
+            if not lm.any():
+                continue
+            h, w = view.rgb.shape[:2]  # type: ignore[union-attr]
+            lm[:, 0] = (u0 + lm[:, 0] * (u1 - u0)) / w
+            lm[:, 1] = (v0 + lm[:, 1] * (v1 - v0)) / h
+            lm[:, 2] *= (u1 - u0) / w  # z: in the image width's scale, as x
+        return out
 
     def estimate_images(self, images: Sequence[NDArray[np.uint8]]) -> NDArray[np.float32]:
         """Landmarks (n, 33, 4) of RGB images (H, W, 3) that need no camera model (video files).
 
-        Send a few images per call: the answers wait in the worker's stdout pipe until all are sent.
+        At most ``PIPE_WINDOW`` images wait for their answers: the answers queue in the worker's
+        stdout pipe (64 KiB) while images are sent, and a full pipe would stop both sides.
         """
         assert self.proc.stdin is not None
         out = np.zeros((len(images), NUM_LANDMARKS, 4), dtype=np.float32)
-        for image in images:
+        received = 0
+        for sent, image in enumerate(images):
+            if sent - received >= PIPE_WINDOW:
+                received = self._receive(out, received)
             rgb = np.ascontiguousarray(image, dtype=np.uint8)
             self.proc.stdin.write(json.dumps({"h": rgb.shape[0], "w": rgb.shape[1]}).encode() + b"\n")
-            self.proc.stdin.write(rgb.tobytes())
-        self.proc.stdin.flush()
-        for i in range(len(images)):
-            rows = self._read()["landmarks"]
-            if rows:
-                out[i] = np.asarray(rows, dtype=np.float32)
+            self.proc.stdin.write(rgb.data)
+            self.proc.stdin.flush()
+        while received < len(images):
+            received = self._receive(out, received)
         return out
+
+    def _receive(self, out: NDArray[np.float32], i: int) -> int:
+        """Read the answer for image ``i`` into ``out``; returns the next image's index."""
+        rows = self._read()["landmarks"]
+        if rows:
+            out[i] = np.asarray(rows, dtype=np.float32)
+        return i + 1
 
     def close(self) -> None:
         if self.proc.poll() is None:
