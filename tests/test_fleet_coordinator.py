@@ -53,6 +53,9 @@ def test_head_on_in_a_single_lane_aisle_one_yields_at_a_passing_place() -> None:
     # the one that yields leaves the lane's line at the aisle's end while the other comes through
     assert max(np.abs(a[:, 1] - 4.1).max(), np.abs(b[:, 1] - 4.1).max()) > 1.0
     assert fleet.coordinator.state.deadlocks == 0
+    # the one that waited its turn (about 35 s) was not taken for stopped the moment it could go
+    assert max(fleet.coordinator.waits.values()) * 0.1 > FleetConfig().stall_s
+    assert fleet.coordinator.state.stops == 0
 
 
 def test_two_pallet_trucks_pass_side_by_side_in_a_wide_aisle() -> None:
@@ -102,6 +105,7 @@ def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
     fleet = Fleet(grid, robots, stopped=("x",))
     fleet.run(150)
     assert fleet.done("a")
+    assert fleet.coordinator.state.stops >= 1  # x was allowed to drive, did not: planned around
     assert fleet.path("a")[:, 1].max() > 6.8  # it took the upper aisle
     assert fleet.min_gap_m() >= SAFETY_M
 
@@ -171,6 +175,59 @@ def test_unreachable_goal_is_reported_and_others_are_unaffected() -> None:
     assert fleet.done("a") and fleet.done("c")
     assert not fleet.done("u")
     assert fleet.min_gap_m() >= SAFETY_M
+
+
+def _held(plan, step: int, horizon: int) -> list:
+    """The vertices whose region ``plan`` holds at ``step`` (as the reservation table books them)."""
+    vs = plan.vertices
+    out = []
+    for m, v in enumerate(vs):
+        acquire = 0 if m == 0 else (vs[m - 1].depart or 0) + 1
+        release = vs[m + 1].arrive if m + 1 < len(vs) else horizon
+        if acquire <= step <= release:
+            out.append(v)
+    return out
+
+
+def test_seeded_fleet_plan_holds_no_two_conflicting_regions_at_any_step() -> None:
+    # 8 robots of the default mix on their seeded missions in the real layout: every pair of plans
+    # keeps its regions apart by the safety distance at every step (a robot's start and its way off
+    # it only off the others' footprints), and every route is timed forwards
+    from simlan_data.config.missions import MissionsConfig, generate_missions
+    from simlan_data.world.agent_types import AGENT_TYPES
+
+    missions = generate_missions(MissionsConfig(robots=8, tasks=1), seed=2)
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=RES)
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(0.6, grid))
+    spec = {
+        n: (tuple(a["pose"]), [tuple(g) for g in a["goals"]], AGENT_TYPES[a["type"]].footprint_m)
+        for n, a in missions.agents.items()
+    }
+    fleet, checked, plan = KinematicFleet(coordinator, spec), 0, None
+    while fleet.t_s < 30.0:  # every plan of the first 30 s (a replan when a robot has driven half its window)
+        fleet.step()
+        if coordinator.state.plan is not plan:
+            plan = coordinator.state.plan
+            _assert_conflict_free(plan.plans, coordinator.config.horizon_steps, coordinator.safety_m)
+            checked += 1
+    assert checked >= 2
+
+
+def _assert_conflict_free(plans: dict, horizon: int, safety_m: float) -> None:
+    from simlan_data.algorithms.fleet import footprint as fp
+
+    assert sum(len(p.vertices) > 1 for p in plans.values()) >= len(plans) // 2
+    for p in plans.values():
+        times = [t for v in p.vertices for t in (v.arrive, v.depart) if t is not None]
+        assert times == sorted(times)
+    names = sorted(plans)
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            for k in range(horizon + 1):
+                for va in _held(plans[a], k, horizon):
+                    for vb in _held(plans[b], k, horizon):
+                        margin = 0.0 if va.loose or vb.loose else safety_m
+                        assert not fp.conflict(va.occ, vb.occ, margin), (a, b, k)
 
 
 def test_real_layout_route_graph_has_aisles_junctions_and_turn_limits() -> None:

@@ -12,6 +12,7 @@ are folded in per search, from a per-(shape, robot) answer that does not depend 
 
 from __future__ import annotations
 
+import itertools
 from typing import Protocol
 
 import numpy as np
@@ -46,26 +47,43 @@ class Pieces:
         self.q = np.concatenate([b + shape.front_m * d, graph.xy])
         self.r = np.concatenate([np.full(len(arcs), shape.half_width_m), np.full(graph.size, shape.reach_m)])
         self.anchor = np.concatenate([arcs[:, 1], np.arange(graph.size)])  # the node each piece ends at
+        self.mid = 0.5 * (self.p + self.q)  # each piece's bounding circle
+        self.bound = 0.5 * np.linalg.norm(self.q - self.p, axis=1) + self.r
+        self._by_anchor = np.argsort(self.anchor, kind="stable")  # pieces grouped by anchor node
+        self._starts = np.searchsorted(self.anchor[self._by_anchor], np.arange(graph.size + 1))
         # how far a piece reaches from its anchor node: the longest edge behind it, its own length
         self.extent_m = float(graph.lengths_m.max(initial=0.0)) + shape.reach_m + shape.half_width_m
 
     def piece(self, k: int) -> Region:
         return self.p[k : k + 1], self.q[k : k + 1], self.r[k : k + 1]
 
-    def hit_by(self, region: Region, margin_m: float) -> NDArray[np.bool_]:
-        """Per piece: whether it comes closer to ``region`` than their radii plus ``margin_m``."""
-        out = np.zeros(len(self.r), dtype=bool)
-        near = np.zeros(self.graph.size, dtype=bool)
-        for a, b, rad in zip(*region):
-            n = max(2, int(np.ceil(np.linalg.norm(b - a) / SAMPLE_M)) + 1)
-            pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-            reach = rad + margin_m + self.extent_m + SAMPLE_M
-            for hits in self.graph.tree.query_ball_point(pts, reach):
-                near[hits] = True
-        cand = np.flatnonzero(near[self.anchor])
-        if len(cand):
-            d = fp.segment_distances(self.p[cand], self.q[cand], region[0], region[1])
-            out[cand] = (d < self.r[cand][:, None] + region[2][None, :] + margin_m).any(axis=1)
+    def hit_by(self, regions: list[Region], margin_m: float) -> NDArray[np.bool_]:
+        """Per region and piece: whether the piece comes closer to the region than their radii plus
+        ``margin_m``. One tree query finds the nodes near each capsule (sampled every SAMPLE_M); only
+        the pieces anchored there are measured, capsule by piece."""
+        p, q, rad = fp.region(*regions)
+        owner = np.repeat(np.arange(len(regions)), [len(r[2]) for r in regions])
+        n = np.maximum(2, np.ceil(np.linalg.norm(q - p, axis=1) / SAMPLE_M).astype(np.int64) + 1)
+        cap = np.repeat(np.arange(len(p)), n)
+        t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n.tolist()])
+        pts = p[cap] + t[:, None] * (q - p)[cap]
+        hits = self.graph.tree.query_ball_point(pts, rad[cap] + margin_m + self.extent_m + SAMPLE_M)
+        counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
+        nodes = np.fromiter(itertools.chain.from_iterable(hits), dtype=np.int64, count=int(counts.sum()))
+        pairs = np.unique(np.repeat(cap, counts) * self.graph.size + nodes)
+        c, node = pairs // self.graph.size, pairs % self.graph.size
+        per = self._starts[node + 1] - self._starts[node]  # pieces anchored at each node
+        c = np.repeat(c, per)
+        first = np.repeat(self._starts[node] - np.cumsum(per) + per, per)
+        k = self._by_anchor[first + np.arange(len(c))]
+        mid, bound = 0.5 * (p + q), 0.5 * np.linalg.norm(q - p, axis=1) + rad
+        gap = np.linalg.norm(self.mid[k] - mid[c], axis=1) - self.bound[k] - bound[c]
+        near = gap < margin_m  # bounding circles first: most pairs are far apart
+        c, k = c[near], k[near]
+        d = fp.pair_distances(self.p[k], self.q[k], p[c], q[c])
+        close = d < self.r[k] + rad[c] + margin_m
+        out = np.zeros((len(regions), len(self.r)), dtype=bool)
+        out[owner[c[close]], k[close]] = True
         return out
 
 
@@ -93,17 +111,25 @@ class ConflictCache:
             return None
         pieces = self.pieces(shape)
         bad, folded = self._planned.get((shape, step), (np.zeros(len(pieces.r), dtype=bool), 0))
-        for region in parts[folded:]:
-            bad = bad | self._hit(shape, pieces, region)
+        new = parts[folded:]
+        self._measure(shape, pieces, new)
+        for region in new:
+            bad = bad | self._hits[(shape, id(region))][1]
         self._planned[(shape, step)] = (bad, len(parts))
-        for name, region in waiting:
-            if (shape, name) not in self._waiting:
-                self._waiting[(shape, name)] = pieces.hit_by(region, self.table.safety_m)
+        missing = [(n, region) for n, region in waiting if (shape, n) not in self._waiting]
+        if missing:
+            rows = pieces.hit_by([region for _, region in missing], self.table.safety_m)
+            for (n, _), row in zip(missing, rows):
+                self._waiting[(shape, n)] = row
+        for name, _ in waiting:
             bad = bad | self._waiting[(shape, name)]
         return bad
 
-    def _hit(self, shape: Shape, pieces: Pieces, region: Region) -> NDArray[np.bool_]:
-        key = (shape, id(region))
-        if key not in self._hits:  # (the region is kept with its answer: its id stays its own)
-            self._hits[key] = (region, pieces.hit_by(region, self.table.safety_m))
-        return self._hits[key][1]
+    def _measure(self, shape: Shape, pieces: Pieces, regions: list[Region]) -> None:
+        """Measure the regions not measured yet against the shape's pieces, all at once."""
+        todo = {id(r): r for r in regions if (shape, id(r)) not in self._hits}
+        if todo:
+            rows = pieces.hit_by(list(todo.values()), self.table.safety_m)
+            for (key, region), row in zip(todo.items(), rows):
+                # (the region is kept with its answer: its id stays its own)
+                self._hits[(shape, key)] = (region, row)

@@ -51,6 +51,7 @@ class _Robot:
     moved_at_ns: int = 0
     moved_from: tuple[float, float] = (0.0, 0.0)
     waiting_since_ns: int | None = None
+    granted_since_ns: int | None = None  # allowed to drive on since then (its frontier ahead of it)
     stopped_since_ns: int | None = None  # treated as an obstacle from then on
 
 
@@ -64,6 +65,7 @@ class FleetState:
     replans: int = 0
     deadlocks: int = 0  # wait-for cycles or waits past deadlock_after_s on a robot that does not move
     failures: dict[str, str] = field(default_factory=dict)  # robot -> unreachable | blocked
+    stops: int = 0  # robots taken for stopped (allowed to drive, not moving for stall_s): planned around
 
 
 class FleetCoordinator:
@@ -146,9 +148,17 @@ class FleetCoordinator:
                     self.config.reach_m,
                 )
             granted = route is not None and frontier(self.state.routes, i.namespace)[0] > route.progress
-            stalled = t_ns - r.moved_at_ns > self.config.stall_s * NS_PER_S
+            if not granted:
+                r.granted_since_ns = None
+            elif r.granted_since_ns is None:
+                r.granted_since_ns = t_ns
+            # stalled: allowed to drive for stall_s and not moving (a robot that waited its turn
+            # is not stopped the moment it may go: it needs time to start)
+            since = max(r.moved_at_ns, r.granted_since_ns or 0)
+            stalled = t_ns - since > self.config.stall_s * NS_PER_S
             if granted and stalled and r.stopped_since_ns is None:
                 r.stopped_since_ns = t_ns
+                self.state.stops += 1
 
     def _must_replan(self, t_ns: int, movers: list[Intent]) -> bool:
         names = {i.namespace for i in movers}

@@ -82,6 +82,17 @@ def segment_distances(
     return np.where(_crossing(a0, a1, b0, b1), 0.0, d)
 
 
+def pair_distances(
+    p1: NDArray[np.float64], q1: NDArray[np.float64], p2: NDArray[np.float64], q2: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(n,) distances between segments p1[i]q1[i] and p2[i]q2[i], exact (0 where they cross)."""
+    d = np.minimum(
+        np.minimum(_point_segment(p1, p2, q2), _point_segment(q1, p2, q2)),
+        np.minimum(_point_segment(p2, p1, q1), _point_segment(q2, p1, q1)),
+    )
+    return np.where(_crossing(p1, q1, p2, q2), 0.0, d)
+
+
 def _point_segment(
     x: NDArray[np.float64], p: NDArray[np.float64], q: NDArray[np.float64]
 ) -> NDArray[np.float64]:
