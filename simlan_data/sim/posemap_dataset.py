@@ -7,8 +7,13 @@ Per sample::
     q ~ U(limit_scale x joint limits)  (seeded)  --> pose the humanoid (PyBullet, kinematic)
       --> landmark world positions (numpy FK of the same skeleton)
       --> per camera: render the humanoid's region only (layered renderer: static warehouse baked
-          once) or cast rays (occlusion=rays)  --> estimator (projection | MediaPipe)
-      --> landmarks (cameras, 33, 4) + q  --> dataset.parquet (polars)
+          once) or cast rays (occlusion=rays)  --> estimator (projection | MediaPipe on the
+          person crop)  --> landmarks (cameras, 33, 4) + q  --> dataset.parquet (polars)
+
+``posemap.workers`` > 1: consecutive slices of the samples in worker processes (joblib's loky, or
+Ray tasks with ``posemap.pool=ray``), each with its own renderer and estimator; the joints are
+drawn and the projection estimator's noise is added in the run itself, so the dataset is the same
+for any worker count.
 
 Deterministic per seed: the joint samples and the estimator's noise come from seeded generators,
 and the renderer is deterministic. Writes into the run directory ``dataset.parquet``,
@@ -81,7 +86,8 @@ class CaptureRig:
                 world = build_world(cid, placements, {}, mesh_dir=Path(mesh_dir))
             for body, label in world.labels.items():
                 labels.set(body, label)
-            self.crop_margin = pm.crop_margin if pm.crop == "person" else None
+            person = pm.crop == "person" and pm.estimator == "mediapipe"
+            self.crop_margin = pm.crop_margin if person else None
             self._last_box: Aabb | None = None
             self.renderers: list[CameraRenderer] = []
             if need_images:
