@@ -208,8 +208,8 @@ def _blocking(
     """The robots not planned yet whose standing places keep ``r`` from its goal: those its plan
     would cross if they were not there (none when it cannot reach its goal even then)."""
     table.set_waiting({})
-    try:
-        free = _plan_one(graph, r, table, timing, queue=False)  # (one search: the goal, no queue)
+    try:  # (one search: the goal, no queue; only a plan that arrives counts)
+        free = _plan_one(graph, r, table, timing, queue=False, complete_only=True)
     finally:
         table.set_waiting(waiting)
     if free is None or not free.complete or free.queued:
@@ -228,7 +228,13 @@ def _clear_steps(r: Request, timing: Timing) -> int:
 
 
 def _plan_one(
-    graph: RouteGraph, r: Request, table: Reservations, timing: Timing, *, queue: bool = True
+    graph: RouteGraph,
+    r: Request,
+    table: Reservations,
+    timing: Timing,
+    *,
+    queue: bool = True,
+    complete_only: bool = False,
 ) -> RobotPlan | None:
     """Space-time A* to the goal, or (``queue``) to a queue node outside it when the goal is held."""
     assert r.goal is not None
@@ -246,7 +252,7 @@ def _plan_one(
 
     to = guide(forward=False)
     if not table.blocked_nodes(timing.horizon, r.shape.half_width_m)[r.goal]:  # free at the horizon
-        plan = search.run(r.goal, to, tail=r.goal_xy)
+        plan = search.run(r.goal, to, tail=r.goal_xy, complete_only=complete_only)
         if plan is not None and not plan.complete and len(plan.vertices) == 1:
             # it would stand still: plain route lengths may point the way it cannot turn to (a lane
             # too narrow to turn in), forward-only ones send it on to where it can
@@ -269,7 +275,9 @@ def _plan_one(
         if any(search.held_at(int(node), k) for k in range(timing.horizon // 2, timing.horizon + 1)):
             continue
         tried += 1
-        plan = search.run(int(node), search.to_goal(int(node)), tail=None, budget=QUEUE_EXPANSIONS)
+        plan = search.run(
+            int(node), search.to_goal(int(node)), tail=None, budget=QUEUE_EXPANSIONS, complete_only=True
+        )
         if plan is not None and plan.vertices[-1].node == node:
             plan.queued = True
             return plan

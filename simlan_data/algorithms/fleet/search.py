@@ -173,10 +173,13 @@ class Search:
         *,
         tail: tuple[float, float] | None,
         budget: int = MAX_EXPANSIONS,
+        complete_only: bool = False,
     ) -> RobotPlan | None:
         """Earliest arrival at ``target`` that it can then hold; else the plan that ends nearest to it
         at the horizon (a windowed plan); None if it cannot even keep clear until the horizon. The
-        guide ``to`` (route lengths to ``target``) also keeps it out of places it could not leave."""
+        guide ``to`` (route lengths to ``target``) also keeps it out of places it could not leave.
+        ``complete_only``: None instead of a windowed plan, found sooner (the search stops once no
+        state left can arrive within the horizon)."""
         r, horizon = self.r, self.timing.horizon
         self.target, self.tail = target, tail
         # guided by plain route lengths, it still never enters a place from which it could not
@@ -194,6 +197,8 @@ class Search:
         tie, stop = len(heap), self.expanded + budget
         while heap and self.expanded < stop:
             f, _, _, t, key, to_horizon = heapq.heappop(heap)
+            if complete_only and f > horizon:
+                return None  # an arrival within the horizon has f <= horizon (its guide is 0 there)
             if to_horizon:  # waits where it is to the horizon: the windowed plan
                 return self._plan(parent, key, complete=False)
             if key in closed:
