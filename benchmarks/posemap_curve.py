@@ -84,6 +84,11 @@ def main() -> int:
     parser.add_argument("--workdir", type=Path, default=REPO / "recordings" / "posemap_curve")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
+    if min(args.sizes) < 10 or args.workers < 0:
+        raise SystemExit(
+            f"invalid --sizes {' '.join(map(str, args.sizes))} / --workers {args.workers}: "
+            "every size needs >= 10 samples (train, validation and test splits), workers >= 0"
+        )
     args.workdir.mkdir(parents=True, exist_ok=True)
     load_before = load_avg()
     cam, largest = args.camera, max(args.sizes)

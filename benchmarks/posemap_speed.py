@@ -146,6 +146,12 @@ def main() -> int:
     parser.add_argument("--json", type=Path)
     parser.add_argument("--runs", default=",".join(RUNS), help="which of the runs, comma-separated")
     args = parser.parse_args()
+    unknown = [k for k in args.runs.split(",") if k not in RUNS]
+    if unknown or args.samples < 1 or args.profile_samples < 1:
+        raise SystemExit(
+            f"invalid --runs {args.runs} / --samples {args.samples} / --profile-samples {args.profile_samples}: "
+            f"runs are {','.join(RUNS)}, sample counts >= 1"
+        )
     args.workdir.mkdir(parents=True, exist_ok=True)
     load_before = load_avg()
     prof = profile(args.profile_samples, args.workdir)
