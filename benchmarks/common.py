@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import datetime
+import json
 import os
 import platform
 import subprocess
@@ -10,6 +12,7 @@ import time
 from collections.abc import Callable, Sequence
 from importlib.metadata import version
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -73,3 +76,24 @@ def run_cli(
         env=env,
         check=False,
     )
+
+
+def write_result(
+    command: str, history: str, load: tuple[str, str], body: dict[str, Any], path: Path | None
+) -> int:
+    """Print a benchmark's results JSON (its command, the machine, the date, the docs page of its
+    history, the load before and after, then ``body``) and write it to ``path``; returns 0."""
+    raw = {
+        "command": command,
+        "machine": machine(),
+        "date": datetime.date.today().isoformat(),
+        "history": history,
+        "load_before": load[0],
+        "load_after": load[1],
+        **body,
+    }
+    text = json.dumps(raw, indent=1)
+    print(text)
+    if path is not None:
+        path.write_text(text + "\n")
+    return 0

@@ -21,7 +21,6 @@ import argparse
 import json
 import sys
 import time
-from datetime import date
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from posemap import dataset, load_avg, train
 
-from common import REPO, machine
+from common import REPO, write_result
 from simlan_data.algorithms.posemap.dataset import read_dataset, split_of, write_dataset
 from simlan_data.algorithms.posemap.training import TrainedMapper
 
@@ -125,23 +124,16 @@ def main() -> int:
         }
         for n, r in rows.items()
     ]  # fmt: skip
-    raw = {
-        "command": f"python benchmarks/posemap_curve.py --sizes {' '.join(map(str, args.sizes))} "
-        f"--camera {cam} --workers {args.workers}",
-        "machine": machine(),
-        "date": date.today().isoformat(),
-        "history": "docs/benchmarks/posemap.md",
-        "load_before": load_before,
-        "load_after": load_avg(),
+    body = {
         "dataset": made,
         "rows": {str(n): r for n, r in rows.items()},
         "figures": figures,
     }
-    text = json.dumps(raw, indent=1)
-    print(text)
-    if args.json:
-        args.json.write_text(text + "\n")
-    return 0
+    command = (
+        f"python benchmarks/posemap_curve.py --sizes {' '.join(map(str, args.sizes))} "
+        f"--camera {cam} --workers {args.workers}"
+    )
+    return write_result(command, "docs/benchmarks/posemap.md", (load_before, load_avg()), body, args.json)
 
 
 if __name__ == "__main__":

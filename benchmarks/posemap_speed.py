@@ -22,7 +22,6 @@ import json
 import subprocess
 import sys
 import time
-from datetime import date
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from posemap import load_avg
 
-from common import REPO, machine, run_cli
+from common import REPO, run_cli, write_result
 from simlan_data.algorithms.posemap.dataset import read_dataset
 from simlan_data.algorithms.posemap.estimators import PIPE_WINDOW, MediaPipeEstimator
 from simlan_data.config.validation import compose_config
@@ -178,22 +177,13 @@ def main() -> int:
             r["equal_to_serial"] = bool(np.array_equal(other, serial))
             r["max_abs_diff_to_serial"] = float(np.abs(other - serial).max())
     figures = _figures(args, prof, runs)
-    raw = {
-        "command": f"python benchmarks/posemap_speed.py --samples {args.samples} --profile-samples {args.profile_samples}",
-        "machine": machine(),
-        "date": date.today().isoformat(),
-        "history": "docs/benchmarks/posemap.md",
-        "load_before": load_before,
-        "load_after": load_avg(),
+    body = {
         "profile": prof,
         "runs": runs,
         "figures": figures,
     }
-    text = json.dumps(raw, indent=1)
-    print(text)
-    if args.json:
-        args.json.write_text(text + "\n")
-    return 0
+    command = f"python benchmarks/posemap_speed.py --samples {args.samples} --profile-samples {args.profile_samples}"
+    return write_result(command, "docs/benchmarks/posemap.md", (load_before, load_avg()), body, args.json)
 
 
 def _figures(args: argparse.Namespace, prof: dict, runs: dict) -> list[dict]:

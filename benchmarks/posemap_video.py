@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from datetime import date
 from pathlib import Path
 
 import cv2
@@ -33,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from posemap import dataset, load_avg, train
 
-from common import REPO, machine, run_cli
+from common import REPO, run_cli, write_result
 from simlan_data.algorithms.posemap.training import TrainedMapper
 from simlan_data.recording import schema
 from simlan_data.recording.reader import RecordingReader
@@ -174,24 +173,17 @@ def main() -> int:
         }
         for name, r in results.items()
     ]
-    raw = {
-        "command": "python benchmarks/posemap_video.py "
-        f"--samples {args.samples} --mediapipe-samples {args.mediapipe_samples} --camera {cam} "
-        f"--duration {args.duration:g} --rate {args.rate:g}",
-        "machine": machine(),
-        "date": date.today().isoformat(),
-        "history": "docs/benchmarks/posemap.md",
-        "load_before": load_before,
-        "load_after": load_avg(),
+    body = {
         "frames_compared": first["frames_compared"],
         "models": results,
         "figures": figures,
     }
-    text = json.dumps(raw, indent=1)
-    print(text)
-    if args.json:
-        args.json.write_text(text + "\n")
-    return 0
+    command = (
+        "python benchmarks/posemap_video.py "
+        f"--samples {args.samples} --mediapipe-samples {args.mediapipe_samples} --camera {cam} "
+        f"--duration {args.duration:g} --rate {args.rate:g}"
+    )
+    return write_result(command, "docs/benchmarks/posemap.md", (load_before, load_avg()), body, args.json)
 
 
 if __name__ == "__main__":
