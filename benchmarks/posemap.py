@@ -90,6 +90,12 @@ def dump_raw(raw: dict, path: Path | None) -> None:
         path.write_text(text + "\n")
 
 
+def one_camera_model(cam: str) -> tuple[list[str], list[str]]:
+    """The one-camera model of the video round trip and the learning curve: its shape, its training."""
+    shape = [f"posemap.cameras=[{cam}]", "posemap.features=image", "posemap.width=256", "posemap.layers=3"]
+    return shape, ["posemap.dropout=0.0", "posemap.lr=0.003", "posemap.epochs=80", "progress=false"]
+
+
 def load_avg() -> str:
     one, five, fifteen = os.getloadavg()
     return f"{one:.1f} / {five:.1f} / {fifteen:.1f}"

@@ -26,13 +26,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from posemap import dataset, load_avg, train
+from posemap import dataset, load_avg, one_camera_model, train
 
 from common import REPO, write_result
 from simlan_data.algorithms.posemap.dataset import read_dataset, split_of, write_dataset
 from simlan_data.algorithms.posemap.training import TrainedMapper
 
-COMMON = ("progress=false",)
 SIMLAN = {"mlp": 0.359, "autogluon": 0.2465}
 
 
@@ -94,13 +93,7 @@ def main() -> int:
     full = f"mediapipe_{cam}_{largest}"
     made = dataset(args.workdir, full, f"posemap.samples={largest}", "posemap.estimator=mediapipe",
                    f"cameras.ids=[{cam}]", f"posemap.workers={args.workers}")  # fmt: skip
-    one_camera = [
-        f"posemap.cameras=[{cam}]",
-        "posemap.features=image",
-        "posemap.width=256",
-        "posemap.layers=3",
-    ]
-    keys = ["posemap.dropout=0.0", "posemap.lr=0.003", "posemap.epochs=80", *COMMON]
+    one_camera, keys = one_camera_model(cam)
     rows = {}
     for n in sorted(args.sizes):
         name = full if n == largest else subset(args.workdir, full, n)

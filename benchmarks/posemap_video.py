@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from posemap import dataset, load_avg, train
+from posemap import dataset, load_avg, one_camera_model, train
 
 from common import REPO, run_cli, write_result
 from simlan_data.algorithms.posemap.training import TrainedMapper
@@ -130,13 +130,7 @@ def main() -> int:
     args.workdir.mkdir(parents=True, exist_ok=True)
     load_before = load_avg()
     cam = args.camera
-    one_camera = [
-        f"posemap.cameras=[{cam}]",
-        "posemap.features=image",
-        "posemap.width=256",
-        "posemap.layers=3",
-    ]
-    train_keys = ["posemap.dropout=0.0", "posemap.lr=0.003", "posemap.epochs=80", *COMMON]
+    one_camera, train_keys = one_camera_model(cam)
     models = {}
     dataset(args.workdir, "dataset", f"posemap.samples={args.samples}", "posemap.occlusion=rays")
     train(args.workdir, "dataset", f"one_camera_{cam}", one_camera, train_keys)
