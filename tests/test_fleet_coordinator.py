@@ -230,28 +230,6 @@ def _assert_conflict_free(plans: dict, horizon: int, safety_m: float) -> None:
                         assert not fp.conflict(va.occ, vb.occ, margin), (a, b, k)
 
 
-def test_a_robot_between_two_lane_nodes_starts_from_the_one_ahead_not_a_stub_beside_it() -> None:
-    # the real layout's graph for the default fleet mix (as the coordinator builds it): a pallet truck
-    # driving west at (39.56, -0.85), between two lane nodes, is nearest to the node of a stub below
-    # the lane whose only way on lies behind it (4 robots, seed 14: it stood there for good)
-    from simlan_data.algorithms.fleet.coordinator import reach_of
-    from simlan_data.config.missions import MissionsConfig
-    from simlan_data.world.agent_types import AGENT_TYPES
-
-    fps = [AGENT_TYPES[t].footprint_m for t in MissionsConfig().types]
-    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=RES)
-    half = max(max(abs(f[2]), abs(f[3])) for f in fps)
-    graph = build_route_graph(
-        grid, radius_m=half + FleetConfig().lane_clearance_m, spacing_m=1.0, reach_m=max(map(reach_of, fps))
-    )
-    pose = (39.56, -0.85)
-    stub = graph.nearest(pose, within_m=1.5)
-    assert stub is not None and all(graph.xy[v][0] > pose[0] for v in graph.neighbours[stub])
-    ahead = graph.nearest_ahead(pose, np.pi, within_m=1.5)
-    assert ahead is not None and ahead != stub and graph.xy[ahead][0] < pose[0]
-    assert any(graph.xy[v][0] < graph.xy[ahead][0] for v in graph.neighbours[ahead])  # the lane goes on west
-
-
 def test_real_layout_route_graph_has_aisles_junctions_and_turn_limits() -> None:
     grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
     graph = build_route_graph(grid, radius_m=0.45 + 0.25, spacing_m=1.0, reach_m=1.31)

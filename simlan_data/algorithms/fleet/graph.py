@@ -134,20 +134,6 @@ class RouteGraph:
         dist, index = self.tree.query(np.asarray(xy, dtype=float))
         return int(index) if np.isfinite(dist) and dist <= within_m else None
 
-    def nearest_ahead(self, xy: tuple[float, float], heading_rad: float, *, within_m: float) -> int | None:
-        """The nearest node within ``within_m`` that does not lie behind a robot at ``xy`` facing
-        ``heading_rad`` (the nearest of all if every one does). A robot between two nodes of a lane
-        then starts from the one it drives to, not from a stub beside the lane it cannot leave."""
-        here = np.asarray(xy, dtype=float)
-        near = self.tree.query_ball_point(here, within_m)
-        if not near:
-            return None
-        d = self.xy[near] - here
-        dist = np.hypot(d[:, 0], d[:, 1])
-        ahead = (d @ np.array([np.cos(heading_rad), np.sin(heading_rad)]) >= 0.0) | (dist < 0.05)
-        order = np.lexsort((dist, ~ahead))  # ahead first, then by distance
-        return int(np.asarray(near)[order[0]])
-
 
 def build_route_graph(
     grid: OccupancyGrid, *, radius_m: float, spacing_m: float, reach_m: float | None = None
