@@ -2,8 +2,8 @@
 
 Time is cut into steps of ``step_s`` (one block of the graph at the fleet's speed); an edge takes
 ``ceil(length / spacing)`` steps. Robots are planned one after the other in priority order; each
-one's plan is a space-time A* against the reservation table of the robots planned before it, and
-is then written into the table.
+one's plan is a space-time search (safe intervals, ``search.py``) against the reservation table of
+the robots planned before it, and is then written into the table.
 
 What a robot occupies is its footprint's region (``footprint.py``): driving a straight edge, the
 capsule from its tail at the edge's start to its nose at the edge's end; turning in place, the
@@ -236,7 +236,7 @@ def _plan_one(
     queue: bool = True,
     complete_only: bool = False,
 ) -> RobotPlan | None:
-    """Space-time A* to the goal, or (``queue``) to a queue node outside it when the goal is held."""
+    """A space-time search to the goal, or (``queue``) to a queue node outside it when the goal is held."""
     assert r.goal is not None
     search = Search(graph, r, table, timing)
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,

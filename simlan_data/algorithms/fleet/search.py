@@ -64,7 +64,7 @@ class Search:
         self._regions: dict[tuple, Region] = {}
         self.pieces = table.conflicts.pieces(r.shape)  # shared: every directed edge, every turn
         self.tail: tuple[float, float] | None = None
-        self.expanded = 0  # states expanded by this search's runs (read by benchmarks)
+        self.expanded = 0  # states expanded by its runs (docs/benchmarks/fleet.md's cost figures)
         self._ivs: dict[tuple, list[tuple[int, int]]] = {}
         self._bad_all: NDArray[np.bool_] | None = None  # (pieces, steps); empty: nothing reserved
         self._held: tuple | None = None
