@@ -230,6 +230,29 @@ def _assert_conflict_free(plans: dict, horizon: int, safety_m: float) -> None:
                         assert not fp.conflict(va.occ, vb.occ, margin), (a, b, k)
 
 
+def test_a_robot_beside_a_stub_starts_from_the_lane_node_ahead_of_it() -> None:
+    # the real layout's graph for the default fleet mix (as the coordinator builds it): a pallet truck
+    # driving west at (39.56, -0.85), between two lane nodes, is nearest to the node of a stub below
+    # the lane whose only edge leads back east (4 robots, seed 14: planned from there, it stood for good)
+    from simlan_data.algorithms.fleet.coordinator import reach_of
+    from simlan_data.config.missions import MissionsConfig
+    from simlan_data.world.agent_types import AGENT_TYPES
+
+    fps = [AGENT_TYPES[t].footprint_m for t in MissionsConfig().types]
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=RES)
+    half = max(max(abs(f[2]), abs(f[3])) for f in fps)
+    graph = build_route_graph(
+        grid, radius_m=half + FleetConfig().lane_clearance_m, spacing_m=1.0, reach_m=max(map(reach_of, fps))
+    )
+    pose = (39.56, -0.85)
+    stub = graph.nearest(pose, within_m=1.5)
+    assert stub is not None and all(graph.xy[v][0] > pose[0] for v in graph.neighbours[stub])
+    west = graph.start_node(pose, np.pi, within_m=1.5)
+    assert west is not None and west != stub and graph.xy[west][0] < pose[0]
+    assert any(graph.xy[v][0] < graph.xy[west][0] for v in graph.neighbours[west])  # the lane goes on
+    assert graph.start_node(pose, 0.0, within_m=1.5) == stub  # facing east the stub's edge leads on
+
+
 def test_real_layout_route_graph_has_aisles_junctions_and_turn_limits() -> None:
     grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
     graph = build_route_graph(grid, radius_m=0.45 + 0.25, spacing_m=1.0, reach_m=1.31)

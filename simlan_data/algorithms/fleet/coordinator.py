@@ -206,7 +206,7 @@ class FleetCoordinator:
                 obstacles.append(self._obstacle(i))
                 continue  # until it moves again (on its own navigator's plan): then it rejoins
             xy = i.pose_xyyaw[:2]
-            start = graph.nearest(xy, within_m=snap)
+            start = graph.start_node(xy, i.pose_xyyaw[2], within_m=snap)
             if start is None:
                 obstacles.append(self._obstacle(i))
                 continue

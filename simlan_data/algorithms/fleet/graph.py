@@ -134,6 +134,28 @@ class RouteGraph:
         dist, index = self.tree.query(np.asarray(xy, dtype=float))
         return int(index) if np.isfinite(dist) and dist <= within_m else None
 
+    def start_node(self, xy: tuple[float, float], heading_rad: float, *, within_m: float) -> int | None:
+        """The node a robot at ``xy`` facing ``heading_rad`` starts from: the nearest within
+        ``within_m``, unless no edge leaves it ahead of that heading (a stub beside the lane the robot
+        drives): then the nearest node ahead of the robot that has one. None if no node is near."""
+        here = np.asarray(xy, dtype=float)
+        near = sorted(
+            self.tree.query_ball_point(here, within_m), key=lambda n: float(np.hypot(*(self.xy[n] - here)))
+        )
+        if not near:
+            return None
+        ahead = np.array([np.cos(heading_rad), np.sin(heading_rad)])
+
+        def way_on(n: int) -> bool:
+            return any(float((self.xy[v] - self.xy[n]) @ ahead) > 0.0 for v in self.neighbours[n])
+
+        if way_on(near[0]):
+            return int(near[0])
+        for n in near[1:]:
+            if float((self.xy[n] - here) @ ahead) >= 0.0 and way_on(n):
+                return int(n)
+        return int(near[0])
+
 
 def build_route_graph(
     grid: OccupancyGrid, *, radius_m: float, spacing_m: float, reach_m: float | None = None
