@@ -73,19 +73,14 @@ def segment_distances(
     p1: NDArray[np.float64], q1: NDArray[np.float64], p2: NDArray[np.float64], q2: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """(n, m) distances between segments p1q1 (n) and p2q2 (m), exact (0 where they cross)."""
-    a0, a1 = p1[:, None, :], q1[:, None, :]
-    b0, b1 = p2[None, :, :], q2[None, :, :]
-    d = np.minimum(
-        np.minimum(_point_segment(a0, b0, b1), _point_segment(a1, b0, b1)),
-        np.minimum(_point_segment(b0, a0, a1), _point_segment(b1, a0, a1)),
-    )
-    return np.where(_crossing(a0, a1, b0, b1), 0.0, d)
+    return pair_distances(p1[:, None, :], q1[:, None, :], p2[None, :, :], q2[None, :, :])
 
 
 def pair_distances(
     p1: NDArray[np.float64], q1: NDArray[np.float64], p2: NDArray[np.float64], q2: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """(n,) distances between segments p1[i]q1[i] and p2[i]q2[i], exact (0 where they cross)."""
+    """Distances between segments p1[i]q1[i] and p2[i]q2[i] (arrays broadcast), exact (0 where
+    they cross)."""
     d = np.minimum(
         np.minimum(_point_segment(p1, p2, q2), _point_segment(q1, p2, q2)),
         np.minimum(_point_segment(p2, p1, q1), _point_segment(q2, p1, q1)),

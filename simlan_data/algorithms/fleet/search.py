@@ -60,7 +60,6 @@ class Search:
         self.start_xy = np.asarray(r.start_xy, dtype=float)
         self.turnable = graph.turnable(r.shape.reach_m).tolist()
         self.turns = graph.turns(r.shape.reach_m, timing.turn_tolerance_rad)
-        self._bad: dict[int, NDArray[np.bool_] | None] = {}
         self._regions: dict[tuple, Region] = {}
         self.pieces = table.conflicts.pieces(r.shape)  # shared: every directed edge, every turn
         self.tail: tuple[float, float] | None = None
@@ -115,12 +114,6 @@ class Search:
             else:
                 self._regions[key] = fp.drive(self.r.shape, self.graph.xy[key[1]], np.asarray(key[2]))
         return self._regions[key]
-
-    def _bad_units(self, step: int) -> NDArray[np.bool_] | None:
-        """Per shared piece: whether it conflicts with what is held at ``step`` (None: nothing is)."""
-        if step not in self._bad:
-            self._bad[step] = self.table.conflicts.bad(self.r.shape, step)
-        return self._bad[step]
 
     def held_at(self, node: int, step: int) -> bool:
         """Whether even a robot standing on ``node`` (its width around it) conflicts at ``step``."""
@@ -294,7 +287,7 @@ class Search:
     def _bad_matrix(self) -> NDArray[np.bool_] | None:
         """Per shared piece and step: whether it conflicts (None: nothing is reserved at any step)."""
         if self._bad_all is None:
-            rows = [self._bad_units(j) for j in range(self.timing.horizon + 1)]
+            rows = [self.table.conflicts.bad(self.r.shape, j) for j in range(self.timing.horizon + 1)]
             if all(b is None for b in rows):
                 self._bad_all = np.zeros((0, 0), dtype=bool)
             else:
