@@ -9,6 +9,7 @@ aggregation step (the Hydra callback, where the sweep was started) reads every m
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import signal
 import socket
@@ -32,6 +33,13 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+# Ray 2.60 turns token authentication on once ~/.ray/auth_token exists (any local ray.init, e.g.
+# posemap.pool=ray, writes one), and then a sweep connecting by address was refused ("InvalidAuthToken":
+# the slow suite failed whenever the posemap pool test ran first). The cluster and the sweep get a
+# token of their own, as a secured cluster does, whatever the user's home holds.
+RAY_AUTH = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(16)}
 
 
 @pytest.fixture
@@ -60,6 +68,7 @@ def ray_cluster() -> Iterator[str]:
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
+        env={**os.environ, **RAY_AUTH},
         start_new_session=True,  # its own process group: nothing else is signalled at the end
     )
     try:
@@ -98,6 +107,7 @@ def test_two_job_sweep_on_a_local_ray_cluster(ray_cluster: str, tmp_path: Path) 
         "world.settle_s=0",
         "progress=false",
         f"hydra.sweep.dir={sweep}",
+        env=RAY_AUTH,
     )
     assert proc.returncode == 0, proc.stderr
     assert "Connected to Ray cluster" in proc.stderr  # a Ray cluster, not a local process pool
