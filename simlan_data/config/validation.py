@@ -267,7 +267,8 @@ def check_finite(node: Any, prefix: str = "") -> None:
 
 def check_nulls(node: Any, schema: type = Config, prefix: str = "") -> None:
     """Refuse null where the schema has no place for it (``~key +key=null`` gets past OmegaConf's
-    own type check: the re-added key is untyped).
+    own type check: the re-added key is untyped), and a list or mapping as an element of a list
+    of numbers or strings (OmegaConf lets ``cameras.ids=[[]]`` through as ``list[int]``).
 
     Raises:
         ConfigError: naming the first such key.
@@ -289,6 +290,26 @@ def check_nulls(node: Any, schema: type = Config, prefix: str = "") -> None:
         for member in members:
             if is_dataclass(member) and isinstance(member, type):
                 check_nulls(value, member, f"{key}.")
+            _check_scalar_elements(key, value, member)
+
+
+SCALARS = (int, float, str, bool)
+
+
+def _check_scalar_elements(key: str, value: Any, hint: Any) -> None:
+    """Refuse a nested list or mapping in a value typed as a list of scalars."""
+    args = get_args(hint)
+    if get_origin(hint) is not list or not args or args[0] not in SCALARS or not isinstance(value, list):
+        return
+    for item in value:
+        if isinstance(item, (list, dict)):
+            kind = {int: "an integer", float: "a number", str: "a string", bool: "true or false"}[args[0]]
+            raise ConfigError.invalid(
+                key,
+                value,
+                f"each element must be {kind}, not a {type(item).__name__}",
+                f"write a flat list: {key}=[a,b]",
+            )
 
 
 # ------------------------------------------------------------------------------ unknown keys
