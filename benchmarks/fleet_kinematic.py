@@ -7,7 +7,8 @@ For every fleet size and seed: the missions of ``scenario=fleet`` (simlan_data/c
 the same generator and seed as the run), the real layout's occupancy grid, and
 ``algorithms/coordinator=fleet`` driving a kinematic fleet (simlan_data/evaluation/fleet_kinematic.py:
 robots follow the coordinator's routes exactly at their mission speed, no physics, no cameras,
-ground-truth poses). Counts goals reached, missions done, deadlocks (the coordinator's), failures,
+ground-truth poses). Counts goals reached, missions done, deadlocks (the coordinator's, and the recording's definition of
+simlan_data/evaluation/fleet_metrics.py on the trace), waits, failures,
 the smallest footprint-to-footprint gap, makespan, tasks per hour and the planning time (wall, and
 CPU time: on a shared machine the wall time is an upper bound, the CPU time compares runs). This
 measures the coordination itself; the closed loop in the simulator is the sweep in docs/fleet.md.
@@ -61,12 +62,16 @@ def one(robots: int, seed: int, tasks: int, limit_s: float) -> dict:
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     reached = goals - fleet.goals_left()
     state = coordinator.state
+    m = fleet.metrics({n: AGENT_TYPES[a["type"]] for n, a in missions.agents.items()})
     tasks_done = sum(
         min(tasks, sum(1 for (_, n, _) in fleet.arrivals if n == name) // 2) for name in missions.agents
     )
     return {
         "robots": robots, "seed": seed, "goals": goals, "reached": reached,
         "missions_done": fleet.goals_left() == 0, "deadlocks": state.deadlocks,
+        # the recording's definitions (fleet_metrics): linked robots with goals, none moving for 20 s
+        "fleet_deadlocks": int(m["fleet.deadlocks"]), "deadlock_s": round(m["fleet.deadlock_s"], 1),
+        "wait_s_mean": round(m["fleet.wait_s_mean"], 1), "wait_s_max": round(m["fleet.wait_s_max"], 1),
         "failures": dict(state.failures), "min_gap_m": round(fleet.min_gap_m(every=5), 3),
         "makespan_s": round(fleet.t_s, 1), "tasks_per_hour": round(3600 * tasks_done / max(fleet.t_s, 1e-9), 1),
         "replans": state.replans, "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
@@ -81,6 +86,11 @@ def summary(rows: list[dict]) -> dict[int, dict]:
             "runs": len(rs), "missions_done": sum(r["missions_done"] for r in rs),
             "goals_reached": f"{sum(r['reached'] for r in rs)}/{sum(r['goals'] for r in rs)}",
             "deadlocks": sum(r["deadlocks"] for r in rs), "min_gap_m": min(r["min_gap_m"] for r in rs),
+            "fleet_deadlocks": sum(r.get("fleet_deadlocks", 0) for r in rs),
+            "runs_with_deadlock": sum(r.get("fleet_deadlocks", 0) > 0 for r in rs),
+            "wait_s_mean": round(float(np.mean([r.get("wait_s_mean", np.nan) for r in rs])), 1),
+            "wait_s_max": max((r.get("wait_s_max", 0.0) for r in rs), default=0.0),
+            "not_done": [r["seed"] for r in rs if not r["missions_done"]],
             "tasks_per_hour_mean": round(float(np.mean([r["tasks_per_hour"] for r in rs])), 1),
             "makespan_s_mean": round(float(np.mean([r["makespan_s"] for r in rs])), 1),
             "wall_s_per_run": round(float(np.mean([r["wall_s"] for r in rs])), 2),
@@ -95,9 +105,13 @@ def figures(table: dict[int, dict], limit_s: float) -> list[dict]:
         {"id": f"fleet_kinematic_{n}", "figure": f"fleet coordinator alone, {n} robots, seeded missions (kinematic robots): missions done",
          "value": row["missions_done"], "unit": f"of {row['runs']}", "target": "every task done, 0 deadlocks",
          "baseline": "none in this benchmark: gpss and independent robots give no routes to drive; the closed loop compares them",
-         "note": f"goals {row['goals_reached']}, deadlocks {row['deadlocks']}, smallest gap {row['min_gap_m']} m, "
+         "note": f"goals {row['goals_reached']}, deadlocks {row['deadlocks']} (coordinator's count; the recording's "
+                 f"definition: {row.get('fleet_deadlocks', '-')} in {row.get('runs_with_deadlock', '-')} runs), "
+                 f"wait mean {row.get('wait_s_mean', '-')} s / max {row.get('wait_s_max', '-')} s, "
+                 f"smallest gap {row['min_gap_m']} m, "
                  f"{row['tasks_per_hour_mean']} tasks/h, makespan {row['makespan_s_mean']} s (limit {limit_s:g} s), "
-                 f"{row['wall_s_per_run']} s wall ({row['cpu_s_per_run']} s CPU) per run"}
+                 f"{row['wall_s_per_run']} s wall ({row['cpu_s_per_run']} s CPU) per run; "
+                 f"not done: {row.get('not_done', [])}"}
         for n, row in table.items()
     ]  # fmt: skip
 

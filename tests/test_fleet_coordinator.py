@@ -277,3 +277,70 @@ def test_config_rejects_a_bad_value_naming_the_key() -> None:
 def test_fleet_coordinator_needs_the_grid() -> None:
     with pytest.raises(ConfigError, match="needs the occupancy grid"):
         FleetCoordinator(FleetConfig(), CoordinatorContext(0.6))
+
+
+def _seeded_fleet(robots: int, seed: int) -> tuple[KinematicFleet, dict]:
+    """The seeded missions of ``scenario=fleet`` on the real layout, driven by a kinematic fleet
+    (as benchmarks/fleet_kinematic.py runs them: 3 tasks per robot, 2 s at each goal)."""
+    from simlan_data.config.missions import MissionsConfig, generate_missions
+    from simlan_data.world.agent_types import AGENT_TYPES
+
+    missions = generate_missions(MissionsConfig(robots=robots, tasks=3), seed=seed)
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=RES)
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(0.6, grid))
+    spec = {
+        n: (
+            tuple(a["pose"]),
+            [tuple(g) for g in a["goals"]],
+            AGENT_TYPES[a["type"]].footprint_m,
+            a["speed_mps"],
+        )
+        for n, a in missions.agents.items()
+    }
+    kinds = {n: AGENT_TYPES[a["type"]] for n, a in missions.agents.items()}
+    return KinematicFleet(coordinator, spec, dwell_s=2.0), kinds
+
+
+@pytest.mark.slow  # (about 15 s each on the real layout)
+@pytest.mark.parametrize(
+    "seed",
+    [
+        # two robots swapped precedence at every replan (the order restarted from the fixed
+        # priorities, undoing the last plan's promotions) and turned back and forth in one lane
+        87,
+        # a pallet truck queued for a busy dock facing a shelf, where it cannot turn, and stood
+        # there for good; the fleet then stood still round it (a gridlock the coordinator missed)
+        38,
+    ],
+)
+def test_seeded_four_robot_missions_that_once_stood_still_reach_every_goal(seed: int) -> None:
+    fleet, kinds = _seeded_fleet(4, seed)
+    fleet.run(900)
+    assert fleet.goals_left() == 0
+    m = fleet.metrics(kinds)
+    assert m["fleet.deadlocks"] == 0 and m["fleet.missions_done"] == 1.0
+    assert m["fleet.min_clearance_m"] > 0.3
+
+
+def test_kinematic_fleet_metrics_count_a_standstill_of_linked_robots_as_a_deadlock() -> None:
+    # two robots with goals that never move (a fault), 1.5 m apart: the recording's deadlock
+    # definition (fleet_metrics: linked robots with goals, none moving for 20 s) counts one
+    # deadlock lasting from 20 s to the end; a third robot drives to its goal meanwhile
+    from simlan_data.evaluation.fleet_metrics import DEADLOCK_S
+    from simlan_data.world.agent_types import AGENT_TYPES
+
+    grid = grid_from_boxes((30, 10), [])
+    jackal = AGENT_TYPES["jackal"]
+    robots = {
+        "a": ((3, 3, 0.0), [(20, 3)], jackal.footprint_m),
+        "b": ((3, 4.5, 0.0), [(20, 6)], jackal.footprint_m),
+        "c": ((3, 8, 0.0), [(11, 8)], jackal.footprint_m),
+    }
+    fleet = Fleet(grid, robots, stopped=("a", "b"))
+    for _ in range(300):
+        fleet.step()
+    assert fleet.done("c") and not fleet.done("a")
+    m = fleet.metrics(dict.fromkeys(robots, jackal))
+    assert m["fleet.deadlocks"] == 1
+    assert m["fleet.deadlock_s"] == pytest.approx(30.0 - DEADLOCK_S, abs=0.3)
+    assert m["fleet.missions_done"] == 0.0 and m["fleet.tasks_completed"] == 0

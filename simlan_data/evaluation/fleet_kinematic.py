@@ -10,15 +10,19 @@ simulator's (tests/test_fleet_coordinator.py, benchmarks/fleet_kinematic.py).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import polars as pl
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.coordinator import Intent
 from simlan_data.algorithms.safety.geometry import Footprint, footprint_polygon
 from simlan_data.constants import NS_PER_S
+from simlan_data.evaluation.fleet_metrics import Status, fleet_metrics
+from simlan_data.world.agent_types import AgentType
 
 
 @dataclass
@@ -44,6 +48,7 @@ class KinematicFleet:
     speed_mps: float = 0.5
     t_s: float = 0.0
     trace: list[dict[str, tuple[float, float, float]]] = field(default_factory=list)
+    times_s: list[float] = field(default_factory=list)  # the time of each ``trace`` entry
     arrivals: list[tuple[float, str, tuple[float, float]]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -78,8 +83,9 @@ class KinematicFleet:
             self._drive(
                 n, r, dt, r.speed_mps if d.speed_limit_mps is None else min(r.speed_mps, d.speed_limit_mps)
             )
-        self.trace.append({n: (r.pose[0], r.pose[1], r.pose[2]) for n, r in self._r.items()})
         self.t_s += dt
+        self.trace.append({n: (r.pose[0], r.pose[1], r.pose[2]) for n, r in self._r.items()})
+        self.times_s.append(self.t_s)
 
     def _drive(self, name: str, r: _Robot, dt: float, v: float) -> None:
         assert r.path is not None
@@ -122,6 +128,24 @@ class KinematicFleet:
 
     def path(self, name: str) -> NDArray[np.float64]:
         return np.array([snap[name][:2] for snap in self.trace])
+
+    def metrics(self, kinds: Mapping[str, AgentType]) -> dict[str, float]:
+        """The ``fleet.*`` metrics of a recording (:func:`fleet_metrics`: deadlocks, waits, clearance,
+        tasks) computed on this run, so the coordinator alone is judged by the same definitions as
+        a simulated run. ``kinds``: each robot's agent type (its footprint)."""
+        stamps = np.round(np.asarray([0.0, *self.times_s]) * NS_PER_S).astype(np.int64)
+        truth, status = {}, {}
+        for n in self._r:
+            poses = np.asarray([self.robots[n][0]] + [snap[n] for snap in self.trace], dtype=float)
+            truth[n] = pl.DataFrame(
+                {"stamp_ns": stamps, "x": poses[:, 0], "y": poses[:, 1], "yaw": poses[:, 2]}
+            )
+            total = len(self.robots[n][1])
+            history: list[Status] = [(0, total, 0, 0, ())]
+            reached = [t for t, name, _ in self.arrivals if name == n]
+            history += [(round(t * NS_PER_S), total, k + 1, 0, ()) for k, t in enumerate(reached)]
+            status[n] = history
+        return fleet_metrics(truth, status, kinds)
 
     def min_gap_m(self, every: int = 1) -> float:
         """The smallest distance between two robots' footprints over the run (every n-th tick)."""

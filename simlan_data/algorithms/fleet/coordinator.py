@@ -91,6 +91,7 @@ class FleetCoordinator:
         self.waits: dict[str, int] = {}  # ticks spent waiting, per robot (as the gpss coordinator)
         self._force_replan = False
         self._clearance: NDArray[np.float32] | None = None
+        self._standstill_ns = 0  # the last standstill of the fleet (deadlock_after_s counts from it)
 
     # ------------------------------------------------------------------ the role's method
     def decide(self, t_ns: int, intents: list[Intent]) -> dict[str, Decision]:
@@ -197,7 +198,7 @@ class FleetCoordinator:
         snap = 1.5 * self.config.spacing_m
         obstacles = [self._obstacle(i) for i in others]
         requests = []
-        for i in sorted(movers, key=lambda i: (i.priority, i.namespace)):
+        for i in sorted(movers, key=self._order_key):
             r = self._robots[i.namespace]
             r.goal = i.goal_xy
             if i.priority < IDLE_PRIORITY:
@@ -234,7 +235,22 @@ class FleetCoordinator:
         for i in movers:
             route = self.state.routes.get(i.namespace)
             r = self._robots[i.namespace]
+            if i.priority >= IDLE_PRIORITY and i.namespace in plan.failures:
+                # an idle robot that cannot get back to where it parked (it moved aside) parks where
+                # it is: standing failed, it held the spot for good, and once that spot was another
+                # robot's goal that robot queued for ever (4 robots, seed 7); parked here, it is
+                # planned last and moves aside when a robot with a goal needs the place
+                r.park = (float(i.pose_xyyaw[0]), float(i.pose_xyyaw[1]))
             r.path_xy = None if route is None else self._path(graph, route, i)
+
+    def _order_key(self, intent: Intent) -> tuple[bool, int, int, str]:
+        """Planning order: the order the last plan settled on (after its promotions), then the
+        robots' priorities. A replan that started from the fixed priorities again undid the last
+        plan's promotions: two robots swapped their precedence at every replan and turned back and
+        forth in one lane for good (4 robots, seed 87)."""
+        last = self.state.plan.order
+        rank = last.index(intent.namespace) if intent.namespace in last else len(last)
+        return (intent.priority >= IDLE_PRIORITY, rank, intent.priority, intent.namespace)
 
     def _shape(self, intent: Intent) -> Shape:
         return Shape.of(intent.footprint_m, tolerance_m=self.config.tracking_m)
@@ -287,7 +303,7 @@ class FleetCoordinator:
             else:
                 r.waiting_since_ns = None
             out[ns] = Decision(limit, tuple(holders) if limit == 0.0 else (), path_xy=r.path_xy)
-        self._check_deadlock(t_ns, waits)
+        self._check_deadlock(t_ns, waits, movers)
         return out
 
     def _at(self, intent: Intent, xy: tuple[float, float] | None) -> bool:
@@ -309,17 +325,28 @@ class FleetCoordinator:
             return None
         return max(0.05, self.config.speed_mps * rest / self.config.brake_m)
 
-    def _check_deadlock(self, t_ns: int, waits: dict[str, list[str]]) -> None:
-        """Count a deadlock (and replan at the next tick) on a wait-for cycle or a wait longer than
-        deadlock_after_s; the replan plans around the robots that stopped."""
+    def _check_deadlock(self, t_ns: int, waits: dict[str, list[str]], movers: list[Intent]) -> None:
+        """Count a deadlock (and replan at the next tick) on a wait-for cycle, a wait longer than
+        deadlock_after_s, or a standstill: no robot with a goal has moved for deadlock_after_s (their
+        plans all stand still: no wait-for edge says why). The replan plans around the robots that
+        stopped; after a standstill the robot planned first goes last (the persisted order is what
+        held them: 4 robots, seed 0, two trucks side by side closer than the safety distance)."""
         bound = self.config.deadlock_after_s * NS_PER_S
+        busy = [i.namespace for i in movers if i.priority < IDLE_PRIORITY]
+        standstill = len(busy) >= 2 and all(
+            t_ns - max(self._robots[n].moved_at_ns, self._standstill_ns) > bound for n in busy
+        )
+        if standstill:
+            self._standstill_ns = t_ns
+            order = self.state.plan.order
+            self.state.plan.order = order[1:] + order[:1]
         long_wait = any(
             (r := self._robots[ns]).waiting_since_ns is not None
             and t_ns - r.waiting_since_ns > bound
             and all(t_ns - self._robots[h].moved_at_ns > bound for h in holders if h in self._robots)
             for ns, holders in waits.items()
         )
-        if wait_cycles(waits) or long_wait:
+        if wait_cycles(waits) or long_wait or standstill:
             self.state.deadlocks += 1
             self._force_replan = True
             for r in self._robots.values():

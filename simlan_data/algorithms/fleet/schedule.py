@@ -276,7 +276,12 @@ def _plan_one(
             continue
         tried += 1
         plan = search.run(
-            int(node), search.to_goal(int(node)), tail=None, budget=QUEUE_EXPANSIONS, complete_only=True
+            int(node),
+            search.to_goal(int(node)),
+            tail=None,
+            budget=QUEUE_EXPANSIONS,
+            complete_only=True,
+            then=r.goal,
         )
         if plan is not None and plan.vertices[-1].node == node:
             plan.queued = True

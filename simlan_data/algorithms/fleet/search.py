@@ -167,17 +167,23 @@ class Search:
         tail: tuple[float, float] | None,
         budget: int = MAX_EXPANSIONS,
         complete_only: bool = False,
+        then: int | None = None,
     ) -> RobotPlan | None:
         """Earliest arrival at ``target`` that it can then hold; else the plan that ends nearest to it
         at the horizon (a windowed plan); None if it cannot even keep clear until the horizon. The
         guide ``to`` (route lengths to ``target``) also keeps it out of places it could not leave.
         ``complete_only``: None instead of a windowed plan, found sooner (the search stops once no
-        state left can arrive within the horizon)."""
+        state left can arrive within the horizon). ``then``: where it drives on to afterwards (a
+        queue node's goal): it only enters places from which it can reach ``then`` driving forwards."""
         r, horizon = self.r, self.timing.horizon
         self.target, self.tail = target, tail
         # guided by plain route lengths, it still never enters a place from which it could not
         # reach the target driving forwards (a dead end facing the wall: robots do not reverse)
-        exits = self.to_goal(target, forward=True) if to.plain else None
+        # (a robot queued facing a shelf, where it cannot turn, stood there for good: 4 robots, seed 38)
+        if then is not None:
+            exits: ToGoal | None = self.to_goal(then, forward=True)
+        else:
+            exits = self.to_goal(target, forward=True) if to.plain else None
         if exits is not None and not math.isfinite(self.start_h(exits)):
             exits = None  # already in such a place: it can only try
         parent: dict[Key, Link | None] = {}
