@@ -29,13 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine
-from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator
-from simlan_data.algorithms.occupancy import grid_from_world
-from simlan_data.algorithms.roles import CoordinatorContext
-from simlan_data.config.missions import MissionsConfig, generate_missions
-from simlan_data.evaluation.fleet_kinematic import KinematicFleet
-from simlan_data.world.agent_types import AGENT_TYPES
-from simlan_data.world.layout import load_layout
+from simlan_data.evaluation.fleet_kinematic import mission_fleet
 
 SAFETY_M = 0.6  # navigation.safety_distance_m's default
 DWELL_S = 2.0  # at each goal (a pickup, a drop-off, a charge)
@@ -43,29 +37,15 @@ DWELL_S = 2.0  # at each goal (a pickup, a drop-off, a charge)
 
 def one(robots: int, seed: int, tasks: int, limit_s: float) -> dict:
     """One seeded mission set to the end (or ``limit_s``)."""
-    missions = generate_missions(MissionsConfig(robots=robots, tasks=tasks), seed=seed)
-    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
-    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(SAFETY_M, grid))
-    spec = {
-        n: (
-            tuple(a["pose"]),
-            [tuple(g) for g in a["goals"]],
-            AGENT_TYPES[a["type"]].footprint_m,
-            a["speed_mps"],
-        )
-        for n, a in missions.agents.items()
-    }
-    goals = sum(len(a["goals"]) for a in missions.agents.values())
-    fleet = KinematicFleet(coordinator, spec, dwell_s=DWELL_S)
+    fleet, kinds = mission_fleet(robots, seed, tasks=tasks, dwell_s=DWELL_S, safety_m=SAFETY_M)
+    goals = fleet.goals_left()
     t0, c0 = time.perf_counter(), time.process_time()
     fleet.run(limit_s)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     reached = goals - fleet.goals_left()
-    state = coordinator.state
-    m = fleet.metrics({n: AGENT_TYPES[a["type"]] for n, a in missions.agents.items()})
-    tasks_done = sum(
-        min(tasks, sum(1 for (_, n, _) in fleet.arrivals if n == name) // 2) for name in missions.agents
-    )
+    state = fleet.coordinator.state
+    m = fleet.metrics(kinds)
+    tasks_done = sum(min(tasks, sum(1 for (_, n, _) in fleet.arrivals if n == name) // 2) for name in kinds)
     return {
         "robots": robots, "seed": seed, "goals": goals, "reached": reached,
         "missions_done": fleet.goals_left() == 0, "deadlocks": state.deadlocks,

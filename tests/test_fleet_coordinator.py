@@ -11,7 +11,7 @@ from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator, build_ro
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.errors import ConfigError
-from simlan_data.evaluation.fleet_kinematic import KinematicFleet
+from simlan_data.evaluation.fleet_kinematic import KinematicFleet, mission_fleet
 from simlan_data.world.layout import load_layout
 
 RES = 0.1
@@ -279,28 +279,6 @@ def test_fleet_coordinator_needs_the_grid() -> None:
         FleetCoordinator(FleetConfig(), CoordinatorContext(0.6))
 
 
-def _seeded_fleet(robots: int, seed: int) -> tuple[KinematicFleet, dict]:
-    """The seeded missions of ``scenario=fleet`` on the real layout, driven by a kinematic fleet
-    (as benchmarks/fleet_kinematic.py runs them: 3 tasks per robot, 2 s at each goal)."""
-    from simlan_data.config.missions import MissionsConfig, generate_missions
-    from simlan_data.world.agent_types import AGENT_TYPES
-
-    missions = generate_missions(MissionsConfig(robots=robots, tasks=3), seed=seed)
-    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=RES)
-    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(0.6, grid))
-    spec = {
-        n: (
-            tuple(a["pose"]),
-            [tuple(g) for g in a["goals"]],
-            AGENT_TYPES[a["type"]].footprint_m,
-            a["speed_mps"],
-        )
-        for n, a in missions.agents.items()
-    }
-    kinds = {n: AGENT_TYPES[a["type"]] for n, a in missions.agents.items()}
-    return KinematicFleet(coordinator, spec, dwell_s=2.0), kinds
-
-
 @pytest.mark.slow  # (about 15 s each on the real layout)
 @pytest.mark.parametrize(
     "seed",
@@ -314,11 +292,14 @@ def _seeded_fleet(robots: int, seed: int) -> tuple[KinematicFleet, dict]:
     ],
 )
 def test_seeded_four_robot_missions_that_once_stood_still_reach_every_goal(seed: int) -> None:
-    fleet, kinds = _seeded_fleet(4, seed)
+    fleet, kinds = mission_fleet(4, seed)
     fleet.run(900)
     assert fleet.goals_left() == 0
     m = fleet.metrics(kinds)
-    assert m["fleet.deadlocks"] == 0 and m["fleet.missions_done"] == 1.0
+    assert m["fleet.missions_done"] == 1.0
+    # (the recording's definition counts robots standing within 2 m for 20 s, which a dock queue
+    # does for a few seconds here; the standstills these seeds had lasted 650-780 s)
+    assert m["fleet.deadlock_s"] < 30.0
     assert m["fleet.min_clearance_m"] > 0.3
 
 

@@ -19,10 +19,15 @@ import polars as pl
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.coordinator import Intent
+from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator
+from simlan_data.algorithms.occupancy import grid_from_world
+from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.algorithms.safety.geometry import Footprint, footprint_polygon
+from simlan_data.config.missions import MissionsConfig, generate_missions
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.fleet_metrics import Status, fleet_metrics
-from simlan_data.world.agent_types import AgentType
+from simlan_data.world.agent_types import AGENT_TYPES, AgentType
+from simlan_data.world.layout import load_layout
 
 
 @dataclass
@@ -157,6 +162,23 @@ class KinematicFleet:
             for b in names[i + 1 :]
         ]
         return float(min(gaps)) if gaps else float("inf")
+
+
+def mission_fleet(
+    robots: int, seed: int, *, tasks: int = 3, dwell_s: float = 2.0, safety_m: float = 0.6
+) -> tuple[KinematicFleet, dict[str, AgentType]]:
+    """The seeded missions of ``scenario=fleet`` (same generator and seed as a run) on the real
+    layout's occupancy grid, driven by ``algorithms/coordinator=fleet``: the kinematic fleet and each
+    robot's agent type. ``safety_m``: navigation.safety_distance_m (its default)."""
+    missions = generate_missions(MissionsConfig(robots=robots, tasks=tasks), seed=seed)
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(safety_m, grid))
+    kinds = {n: AGENT_TYPES[a["type"]] for n, a in missions.agents.items()}
+    spec = {
+        n: (tuple(a["pose"]), [tuple(g) for g in a["goals"]], kinds[n].footprint_m, a["speed_mps"])
+        for n, a in missions.agents.items()
+    }
+    return KinematicFleet(coordinator, spec, dwell_s=dwell_s), kinds
 
 
 def _along(path: NDArray[np.float64], xy: NDArray[np.float64]) -> float:
