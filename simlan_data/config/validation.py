@@ -140,7 +140,13 @@ def _unknown_key(err: OmegaConfBaseException) -> ConfigError:
     key, owner = (m.group(1), m.group(2)) if m else (full.rsplit(".", 1)[-1], "the config")
     full = full or key
     parent = full.rsplit(".", 1)[0] if "." in full else ""
-    candidates = [k for k in _typed_keys() if k.rsplit(".", 1)[0] == parent or (not parent and "." not in k)]
+    owner_type = getattr(err, "object_type", None)  # the dataclass that lacks the key (a plug-in's too)
+    if is_dataclass(owner_type):
+        candidates = [f"{parent}.{f.name}" if parent else f.name for f in fields(owner_type)]
+    else:
+        candidates = [
+            k for k in _typed_keys() if k.rsplit(".", 1)[0] == parent or (not parent and "." not in k)
+        ]
     if not candidates:  # a key inside an agent or another dict of dataclasses
         from simlan_data.config.schema import AgentConfig
 
