@@ -146,6 +146,18 @@ def test_notes_only_when_something_is_wrong(short_run: Path) -> None:
         "safety:",
         "realtime",
     ]
+    held = clean | {
+        "navigation.robot_agent_1.goals_reached": 0.0,
+        "navigation.robot_agent_1.goals_failed": 4.0,
+        "navigation.robot_agent_1.goals_failed.blocked": 4.0,
+        "safety.robot_agent_1.stopped_at_end": 1.0,
+        "safety.robot_agent_1.stopped_at_end.restricted_area": 1.0,
+    }
+    (note,) = run_notes(held, ["robot_agent_1"])
+    assert note.in_summary and note.text.endswith(
+        "4 blocked (no progress for 10 s at the end); a safety stop held it at the end "
+        "(restricted_area; see the safety events)"
+    ), note.text
     # the short run (3 s) reaches none of its four goals: the report says so at the top
     report = (short_run / "report.md").read_text()
     top = report[: report.index("| | value | unit |")]

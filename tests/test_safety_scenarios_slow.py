@@ -23,6 +23,7 @@ def _run(tmp_path: Path, *overrides: str) -> dict[str, float]:
     run_dir = tmp_path / "run"
     proc = run_cli(*overrides, f"hydra.run.dir={run_dir}", "progress=false", timeout=1800)
     assert proc.returncode == 0, proc.stderr
+    (tmp_path / "stdout.txt").write_text(proc.stdout)
     return load_metrics(run_dir / "metrics.json")  # strict JSON: NaN is null
 
 
@@ -40,10 +41,15 @@ def test_safety_scenario_figures(scenario: str, tmp_path: Path) -> None:
     if scenario == "restricted_zone":
         assert m["safety.stops.restricted_area"] == 1 and m["safety.min_clearance_zone_m"] > 0.2
         assert m["navigation.robot_agent_2.goals_reached"] == 1  # the Jackal may cross the bay
+        # the truck stands before the bay to the end, and the summary says why it missed its goal
+        assert m["safety.robot_agent_1.stopped_at_end.restricted_area"] == 1
+        summary = (tmp_path / "stdout.txt").read_text()
+        assert "a safety stop held it at the end (restricted_area" in summary, summary
     if scenario == "blind_spot":
         assert m["safety.stops.unobserved"] == 1
     if scenario == "humanoid_crossing":
         assert m["safety.stops.ttc"] >= 1 and m["navigation.goals_reached"] == m["navigation.goals_total"]
+        assert m["safety.robot_agent_1.stopped_at_end"] == 0  # it drove on once the person had passed
 
 
 @pytest.mark.parametrize(("guarded", "collides"), [("none", True), ("both", False)])

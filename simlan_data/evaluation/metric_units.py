@@ -113,6 +113,10 @@ UNITS: dict[str, MetricUnit] = {
     **_per_agent("safety", "stops", MetricUnit(_COUNT, "safety stops")),
     "safety.stops.*": MetricUnit(_COUNT, "safety stops of this cause"),
     "safety.slows": MetricUnit(_COUNT, "slow-downs"),
+    "safety.*.stopped_at_end": MetricUnit(_COUNT, "1: a safety stop still held the robot when the run ended"),
+    "safety.*.stopped_at_end.*": MetricUnit(
+        _COUNT, "1: the cause of the stop that held the robot at the end"
+    ),
     **_per_agent("safety", "violations", MetricUnit(_COUNT, "safety violations (judged on ground truth)")),
     "safety.violations.zone_entries": MetricUnit(_COUNT, "entries into a restricted zone"),
     "safety.violations.collisions": MetricUnit(_COUNT, "collisions judged as violations"),

@@ -55,7 +55,16 @@ def _goals_note(metrics: Mapping[str, float], ns: str, failed_recorded: int) -> 
         for reason, what in _FAILURE_WHY.items()
         if (n := metrics.get(f"navigation.{ns}.goals_failed.{reason}", 0.0))
     )
-    return Note(f"{text}; {failed:.0f} failed: {why}", in_summary=True)
+    return Note(f"{text}; {failed:.0f} failed: {why}{_held(metrics, ns)}", in_summary=True)
+
+
+def _held(metrics: Mapping[str, float], ns: str) -> str:
+    """``"; the safety layer held it at the end (cause)"`` when a stop still held ``ns``, else ``""``."""
+    if not metrics.get(f"safety.{ns}.stopped_at_end"):
+        return ""
+    prefix = f"safety.{ns}.stopped_at_end."
+    causes = [k[len(prefix) :] for k, v in metrics.items() if k.startswith(prefix) and v]
+    return f"; a safety stop held it at the end ({', '.join(causes) or 'cause not recorded'}; see the safety events)"
 
 
 def run_notes(
