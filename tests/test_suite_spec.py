@@ -90,6 +90,10 @@ def test_unmet_requirements_make_a_case_pending_not_failed(tmp_path: Path) -> No
     assert unmet("config:algorithms.localizer.bias_m") == ""
     assert unmet("conf:scenario/single_truck") == ""
     assert unmet("conf:scenario/nope") == "config file conf/scenario/nope.yaml"
+    assert unmet("module:json") == ""
+    assert unmet("module:no_such_module_here=posemap") == (
+        "Python module 'no_such_module_here' (pip install -e \".[posemap]\")"
+    )
 
 
 @pytest.mark.parametrize(

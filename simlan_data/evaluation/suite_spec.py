@@ -35,13 +35,15 @@ Layout (every key is checked; a bad one is one error line naming the place)::
 
 SOURCE is ``run`` (the run's metrics.json) or a replay algorithm of the case. A requirement is
 ``replay:NAME`` (a registered replay algorithm), ``conf:GROUP/OPTION`` (a config file) or
-``config:KEY.PATH`` (a key of the typed config); the case's replay algorithms and its
+``config:KEY.PATH`` (a key of the typed config) or ``module:NAME[=EXTRA]`` (an importable Python
+module, from the package's extra EXTRA: ``module:torch=posemap``); the case's replay algorithms and its
 ``GROUP=OPTION`` overrides are required implicitly.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import itertools
 import math
 from collections.abc import Mapping
@@ -165,10 +167,15 @@ def unmet(requirement: str) -> str:
         return "" if (CONF_DIR / f"{name}.yaml").is_file() else f"config file conf/{name}.yaml"
     if kind == "config":
         return "" if _config_has(name) else f"config key '{name}'"
+    if kind == "module" and name:
+        module, _, extra = name.partition("=")
+        if importlib.util.find_spec(module) is not None:  # finds, does not import (torch takes seconds)
+            return ""
+        return f"Python module '{module}'" + (f' (pip install -e ".[{extra}]")' if extra else "")
     raise _err(
         "requires",
         f"invalid requirement {requirement!r}",
-        "expected replay:NAME, conf:GROUP/OPTION or config:KEY.PATH",
+        "expected replay:NAME, conf:GROUP/OPTION, config:KEY.PATH or module:NAME[=EXTRA]",
         "e.g. replay:safety",
     )
 
