@@ -84,6 +84,20 @@ def prepare(cmd: str, subs: dict[str, str], cwd: Path) -> str:
     return cmd
 
 
+def table(paths: list[Path]) -> str:
+    """One Markdown row per command result (a command run twice: its last result)."""
+    last: dict[str, dict] = {}
+    for path in paths:
+        for line in path.read_text(encoding="utf-8").splitlines():
+            item = json.loads(line)
+            last[item["where"] + item["cmd"]] = item
+    rows = ["| where | command (as written) | exit | wall s |", "| --- | --- | --- | --- |"]
+    for item in sorted(last.values(), key=lambda i: (i["where"].split(":")[0], int(i["where"].split(":")[1]))):
+        cmd = " ".join(item["cmd"].replace("\\\n", " ").split()).replace("|", "\\|")
+        rows.append(f"| {item['where']} | `{cmd}` | {item['rc']} | {item['wall_s']:g} |")
+    return "\n".join(rows)
+
+
 def _ids(specs: list[str], n: int) -> list[int]:
     ids: list[int] = []
     for spec in specs:
@@ -103,7 +117,11 @@ def main() -> int:
     ap.add_argument("--sub", action="append", default=[], metavar="KEY=VALUE", help="placeholder value")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per command")
     ap.add_argument("--jsonl", type=Path, help="append one result line per command here")
+    ap.add_argument("--table", nargs="*", type=Path, metavar="JSONL", help="print results as a Markdown table")
     args = ap.parse_args()
+    if args.table:
+        print(table(args.table))
+        return 0
     commands = extract(args.cwd)
     if args.list:
         for item in commands:
