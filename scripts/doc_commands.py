@@ -92,7 +92,9 @@ def table(paths: list[Path]) -> str:
             item = json.loads(line)
             last[item["where"] + item["cmd"]] = item
     rows = ["| where | command (as written) | exit | wall s |", "| --- | --- | --- | --- |"]
-    for item in sorted(last.values(), key=lambda i: (i["where"].split(":")[0], int(i["where"].split(":")[1]))):
+    for item in sorted(
+        last.values(), key=lambda i: (i["where"].split(":")[0], int(i["where"].split(":")[1]))
+    ):
         cmd = " ".join(item["cmd"].replace("\\\n", " ").split()).replace("|", "\\|")
         rows.append(f"| {item['where']} | `{cmd}` | {item['rc']} | {item['wall_s']:g} |")
     return "\n".join(rows)
@@ -117,7 +119,9 @@ def main() -> int:
     ap.add_argument("--sub", action="append", default=[], metavar="KEY=VALUE", help="placeholder value")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per command")
     ap.add_argument("--jsonl", type=Path, help="append one result line per command here")
-    ap.add_argument("--table", nargs="*", type=Path, metavar="JSONL", help="print results as a Markdown table")
+    ap.add_argument(
+        "--table", nargs="*", type=Path, metavar="JSONL", help="print results as a Markdown table"
+    )
     args = ap.parse_args()
     if args.table:
         print(table(args.table))
