@@ -558,7 +558,9 @@ def _reader_option(options: dict[str, Any]) -> str:
 
 def _frame_timings(localizer: Any, ctx: ReplayContext) -> dict[str, float]:
     """Summarize the localizer's frame timings (per mode) and write frame_timings.parquet."""
-    frames = [t.seconds for t in getattr(localizer, "timings", [])]
+    if not hasattr(localizer, "timings"):  # a localizer that keeps none: no figure, not "0 frames"
+        return {}
+    frames = [t.seconds for t in localizer.timings]
     metrics = {"replay.localization.frames_processed": float(len(frames))}
     if frames:
         metrics["replay.localization.frame_ms_median"] = float(np.median(frames) * 1e3)
