@@ -125,3 +125,24 @@ def test_a_suite_case_selects_it_as_a_config_group() -> None:
     doc = _job_config(["algorithms/localizer=foreground", "algorithms.localizer.threshold=30"], 0)
     assert {"override /algorithms/localizer": "foreground"} in doc["defaults"]
     assert doc["algorithms"]["localizer"]["threshold"] == 30
+
+
+def test_a_large_blob_is_refused_only_where_another_robot_may_have_merged_into_it(foreground_run: Path) -> None:
+    """A truck that reaches a pallet grows its blob beyond merged_ratio (measured in the docs' 60 s
+    run: 0.6 -> 1.05-1.39 m2 from 25.6 s); refusing it lost the lone truck for good. Two robots
+    whose predictions share the blob: still refused."""
+    from simlan_data.algorithms.foreground_localizer import Blob
+    from simlan_data.recording.cameras import cameras_in_recording
+
+    with RecordingReader(foreground_run / "recording") as reader:
+        cameras = cameras_in_recording(reader)
+    loc = ForegroundLocalizer(ForegroundConfig(start_poses=(0.0, 0.0, 0.0, 20.0, 0.0, 0.0)), _context(cameras, 2))
+    one, two = loc.robots
+    loc.areas = {one.namespace: 0.6, two.namespace: 0.6}
+    big = Blob(-0.5, 0.0, 1.2)  # 2x the truck's own area, 0.3 m from its predicted top (-0.8, 0)
+    apart = {one.namespace: (0.0, 0.0, 0.0), two.namespace: (20.0, 0.0, 0.0)}
+    assert [(m.namespace, b) for m, b in loc._assign([one, two], [big], apart)] == [(one.namespace, big)]
+    close = {one.namespace: (0.0, 0.0, 0.0), two.namespace: (0.4, 0.2, 0.0)}  # both tops within gate_m
+    assert loc._assign([one, two], [big], close) == []
+    small = Blob(-0.7, 0.0, 0.7)  # a blob of one robot's size: the nearer robot takes it
+    assert [m.namespace for m, _ in loc._assign([one, two], [small], close)] == [one.namespace]

@@ -388,18 +388,32 @@ class ForegroundLocalizer:
         if not robots or not blobs:
             return []
         cost = np.full((len(robots), len(blobs)), 1e6)
+        tops = {
+            m.namespace: self._top(m, *predicted[m.namespace])
+            for m in self.robots
+            if m.namespace in predicted
+        }
+        bx = np.array([b.x_m for b in blobs])
+        by = np.array([b.y_m for b in blobs])
+        near = {ns: np.hypot(bx - tx, by - ty) <= self.config.gate_m for ns, (tx, ty) in tops.items()}
         for i, m in enumerate(robots):
-            x, y, yaw = predicted[m.namespace]
+            x, _, _ = predicted[m.namespace]
             if np.isnan(x):
                 cost[i] = [-b.area_m2 for b in blobs]
                 continue
-            tx, ty = self._top(m, x, y, yaw)
-            d = np.array([np.hypot(b.x_m - tx, b.y_m - ty) for b in blobs])
+            tx, ty = tops[m.namespace]
+            d = np.hypot(bx - tx, by - ty)
+            # two robots merged: a blob much larger than this robot's own with another robot
+            # expected within the gate too (a truck with its pallet alone is not two robots)
+            others = np.zeros(len(blobs), dtype=bool)
+            for ns, hit in near.items():
+                if ns != m.namespace:
+                    others |= hit
             area = self.areas.get(m.namespace)
-            merged = np.array(
+            larger = np.array(
                 [area is not None and b.area_m2 > self.config.merged_ratio * area for b in blobs]
             )
-            cost[i] = np.where((d <= self.config.gate_m) & ~merged, d, 1e6)
+            cost[i] = np.where((d <= self.config.gate_m) & ~(larger & others), d, 1e6)
         rows, cols = linear_sum_assignment(cost)
         return [(robots[r], blobs[c]) for r, c in zip(rows.tolist(), cols.tolist()) if cost[r, c] < 1e6]
 
