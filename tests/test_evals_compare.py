@@ -210,3 +210,23 @@ def test_candidate_refuses_accept_and_regenerate(tmp_path: Path, flag: str) -> N
         evals.main(["mini", "--file", str(tiny_suite(tmp_path)), "--candidate", CANDIDATE, flag])
     assert err.value.exit_code == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["suite.yaml"]
+
+
+@pytest.mark.parametrize("candidate", ["algorithms.localizer.method=pnp", "algorithms/localizer=foreground"])
+def test_a_candidate_leaves_out_the_cases_that_pin_their_own_algorithm_of_its_role(
+    candidate: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The shipped base suite's markerfree case selects algorithms/localizer=foreground itself: a
+    localizer candidate does not apply there (the README's `--candidate algorithms/localizer=centroid`
+    stopped with exit 2 on its start_poses key); every other simulated case composes with it."""
+    from simlan_data.apps import evals
+    from simlan_data.evaluation.suite_spec import load_suite
+
+    args = evals.build_parser().parse_args(["base", "--candidate", candidate])
+    suite = load_suite(args.file, args.suite)
+    _, cases = evals._compared_cases(args, suite)
+    families = {c.family for c in cases}
+    assert "markerfree" not in families and {"single_truck", "multi_robot", "default"} <= families
+    assert "note: case markerfree pins its own algorithms/localizer=foreground" in capsys.readouterr().out
+    if candidate.startswith("algorithms.localizer.method"):  # (composing every job twice: 25 s)
+        evals._check_candidate(suite, cases, [], [candidate])  # raised ConfigError before

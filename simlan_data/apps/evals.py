@@ -393,7 +393,10 @@ def _compared_cases(args: argparse.Namespace, suite: Suite) -> tuple[list[Case],
             raise ConfigError(f"--candidate with {flag}", "arguments", why, "drop one of them")
     _check_run_args(args)
     selected = [c for c in _select(suite, args.only) if not c.pending]
-    cases = [c for c in selected if c.recording is None]
+    pinned = {c.name: g for c in selected if (g := _pinned_group(c, list(args.candidate)))}
+    for name, group in pinned.items():
+        print(f"note: case {name} pins its own {group} (it tests that one): not compared")
+    cases = [c for c in selected if c.recording is None and c.name not in pinned]
     if not cases:
         raise ConfigError(
             "nothing to compare",
@@ -402,6 +405,27 @@ def _compared_cases(args: argparse.Namespace, suite: Suite) -> tuple[list[Case],
             "pick simulated cases (e.g. suite base)",
         )
     return selected, cases
+
+
+def _candidate_group(override: str) -> str:
+    """The config group an override selects or sets a key of (``algorithms/localizer=x`` and
+    ``algorithms.localizer.alpha=1``: ``algorithms/localizer``); "" for other keys."""
+    key = override.partition("=")[0].lstrip("+~")
+    if "/" in key:
+        return key
+    parts = key.split(".")
+    return f"{parts[0]}/{parts[1]}" if parts[0] == "algorithms" and len(parts) > 2 else ""
+
+
+def _pinned_group(case: Case, candidate: list[str]) -> str:
+    """The group of the candidate's that ``case`` selects itself (the marker-free case picks
+    ``algorithms/localizer=foreground``: a test of that localizer, no place for another), else ""."""
+    groups = {g for o in candidate if (g := _candidate_group(o))}
+    for override in case.overrides:
+        key = override.partition("=")[0].lstrip("+~")
+        if key in groups:
+            return f"{override.lstrip('+~')}"
+    return ""
 
 
 def _run_side(
