@@ -127,7 +127,9 @@ def test_a_suite_case_selects_it_as_a_config_group() -> None:
     assert doc["algorithms"]["localizer"]["threshold"] == 30
 
 
-def test_a_large_blob_is_refused_only_where_another_robot_may_have_merged_into_it(foreground_run: Path) -> None:
+def test_a_large_blob_is_refused_only_where_another_robot_may_have_merged_into_it(
+    foreground_run: Path,
+) -> None:
     """A truck that reaches a pallet grows its blob beyond merged_ratio (measured in the docs' 60 s
     run: 0.6 -> 1.05-1.39 m2 from 25.6 s); refusing it lost the lone truck for good. Two robots
     whose predictions share the blob: still refused."""
@@ -136,7 +138,9 @@ def test_a_large_blob_is_refused_only_where_another_robot_may_have_merged_into_i
 
     with RecordingReader(foreground_run / "recording") as reader:
         cameras = cameras_in_recording(reader)
-    loc = ForegroundLocalizer(ForegroundConfig(start_poses=(0.0, 0.0, 0.0, 20.0, 0.0, 0.0)), _context(cameras, 2))
+    loc = ForegroundLocalizer(
+        ForegroundConfig(start_poses=(0.0, 0.0, 0.0, 20.0, 0.0, 0.0)), _context(cameras, 2)
+    )
     one, two = loc.robots
     loc.areas = {one.namespace: 0.6, two.namespace: 0.6}
     big = Blob(-0.5, 0.0, 1.2)  # 2x the truck's own area, 0.3 m from its predicted top (-0.8, 0)
