@@ -96,7 +96,10 @@ def test_failed_goals_in_the_summary_and_the_report(failures_run: tuple[Path, st
         "robot_agent_1 reached 0 of 2 goals in 12 s simulated; 2 failed: "
         "1 unreachable (no path), 1 timeout (the run ended first)"
     )
-    forklift = "robot_agent_2 reached 0 of 1 goals in 12 s simulated; 1 failed: 1 blocked (no progress for 10 s at the end)"
+    forklift = (  # it turned into a shelf: the safety layer's collision stop holds it to the end
+        "robot_agent_2 reached 0 of 1 goals in 12 s simulated; 1 failed: 1 blocked (no progress for 10 s "
+        "at the end); a safety stop held it at the end (collision; see the safety events)"
+    )
     notes = [
         line.split("note", 1)[1].strip() for line in console.splitlines() if line.strip().startswith("note ")
     ]
