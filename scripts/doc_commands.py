@@ -85,16 +85,21 @@ def prepare(cmd: str, subs: dict[str, str], cwd: Path) -> str:
 
 
 def table(paths: list[Path]) -> str:
-    """One Markdown row per command result (a command run twice: its last result)."""
+    """One Markdown row per command (a command run twice: its last result), placed where the
+    docs hold it now; a command whose text has changed since keeps its old place, marked so."""
+    now = {item["cmd"]: item["where"] for item in extract(ROOT)}
     last: dict[str, dict] = {}
     for path in paths:
         for line in path.read_text(encoding="utf-8").splitlines():
             item = json.loads(line)
-            last[item["where"] + item["cmd"]] = item
+            last[item["cmd"]] = item
+    for cmd, item in last.items():
+        item["where"] = now.get(cmd, f"{item['where']} (since changed)")
     rows = ["| where | command (as written) | exit | wall s |", "| --- | --- | --- | --- |"]
-    for item in sorted(
-        last.values(), key=lambda i: (i["where"].split(":")[0], int(i["where"].split(":")[1]))
-    ):
+    order = sorted(
+        last.values(), key=lambda i: (i["where"].split(":")[0], int(i["where"].split(":")[1].split()[0]))
+    )
+    for item in order:
         cmd = " ".join(item["cmd"].replace("\\\n", " ").split()).replace("|", "\\|")
         rows.append(f"| {item['where']} | `{cmd}` | {item['rc']} | {item['wall_s']:g} |")
     return "\n".join(rows)
