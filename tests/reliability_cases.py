@@ -68,6 +68,7 @@ CONFIG_CASES = [
         ("agent key forced with +", ["+agents.robot_agent_1.typ=jackal"], r"unknown key agents.robot_agent_1.typ in config: AgentConfig has no such key; did you mean agents.robot_agent_1.type\?"),
         ("algorithm key forced with +", ["+algorithms.localizer.min_side=1"], r"unknown key algorithms.localizer.min_side in config: LocalizerParams has no such key; did you mean algorithms.localizer.min_side_px\?"),
         ("selected algorithm's key misspelt", ["algorithms/coordinator=fleet", "algorithms.coordinator.horizon_z=120"], r"unknown key algorithms.coordinator.horizon_z in config: FleetConfigSelection has no such key; did you mean algorithms.coordinator.horizon_s\?"),
+        ("algorithm section given a value (found by the fuzzer)", ["algorithms.safety=0"], r"invalid algorithms.safety=0 in config: expected the selected algorithm's section \(its keys\), not a value; select an algorithm with algorithms/safety=NAME"),
         ("flush period zero", ["recording.flush_period_s=0"], r"invalid recording.flush_period_s=0.0 in config: must be > 0"),
         ("flush period negative", ["recording.flush_period_s=-1"], r"invalid recording.flush_period_s=-1.0 in config: must be > 0"),
         ("epoch not a date", ["recording.epoch=notadate"], r"invalid recording.epoch='notadate' in config: not an ISO 8601 date and time; give an ISO 8601 UTC time such as recording.epoch=2026-01-01T00:00:00Z"),

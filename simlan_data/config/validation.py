@@ -372,6 +372,14 @@ def _check_dataclass_keys(node: Any, schema: type, prefix: str) -> None:
             continue
         if schema is AlgorithmsConfig and isinstance(value, dict):
             _check_algorithm_keys(value, key, f"{prefix}{key}.")
+        elif schema is AlgorithmsConfig and value is not None:  # algorithms.safety=0: not a section
+            raise ConfigError(
+                f"invalid {prefix}{key}={value!r}",
+                "config",
+                "expected the selected algorithm's section (its keys), not a value",
+                f"select an algorithm with {prefix.replace('.', '/')}{key}=NAME and set its keys with "
+                f"{prefix}{key}.KEY=VALUE",
+            )
         else:
             check_known_keys(value, known[key], f"{prefix}{key}.")
 
