@@ -130,9 +130,9 @@ def test_a_suite_case_selects_it_as_a_config_group() -> None:
 def test_a_large_blob_is_refused_only_where_another_robot_may_have_merged_into_it(
     foreground_run: Path,
 ) -> None:
-    """A truck that reaches a pallet grows its blob beyond merged_ratio (measured in the docs' 60 s
-    run: 0.6 -> 1.05-1.39 m2 from 25.6 s); refusing it lost the lone truck for good. Two robots
-    whose predictions share the blob: still refused."""
+    """The lone truck's blob grew beyond merged_ratio (measured in the docs' 60 s run: 0.6 ->
+    1.05-1.39 m2 from 25.6 s); refusing it lost the truck for good. Two robots whose predictions
+    share the blob: still refused."""
     from simlan_data.algorithms.foreground_localizer import Blob
     from simlan_data.recording.cameras import cameras_in_recording
 

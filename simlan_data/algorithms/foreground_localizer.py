@@ -388,27 +388,25 @@ class ForegroundLocalizer:
         if not robots or not blobs:
             return []
         cost = np.full((len(robots), len(blobs)), 1e6)
-        tops = {
-            m.namespace: self._top(m, *predicted[m.namespace])
-            for m in self.robots
-            if m.namespace in predicted
-        }
         bx = np.array([b.x_m for b in blobs])
         by = np.array([b.y_m for b in blobs])
-        near = {ns: np.hypot(bx - tx, by - ty) <= self.config.gate_m for ns, (tx, ty) in tops.items()}
+        dist = {  # every predicted robot's distance from its top to each blob
+            m.namespace: np.hypot(bx - tx, by - ty)
+            for m in self.robots
+            if m.namespace in predicted
+            for tx, ty in [self._top(m, *predicted[m.namespace])]
+        }
         for i, m in enumerate(robots):
-            x, _, _ = predicted[m.namespace]
-            if np.isnan(x):
+            if np.isnan(predicted[m.namespace][0]):
                 cost[i] = [-b.area_m2 for b in blobs]
                 continue
-            tx, ty = tops[m.namespace]
-            d = np.hypot(bx - tx, by - ty)
+            d = dist[m.namespace]
             # two robots merged: a blob much larger than this robot's own with another robot
-            # expected within the gate too (a truck with its pallet alone is not two robots)
+            # expected within the gate too (one robot's blob that grew is not two robots)
             others = np.zeros(len(blobs), dtype=bool)
-            for ns, hit in near.items():
+            for ns, other in dist.items():
                 if ns != m.namespace:
-                    others |= hit
+                    others |= other <= self.config.gate_m
             area = self.areas.get(m.namespace)
             larger = np.array(
                 [area is not None and b.area_m2 > self.config.merged_ratio * area for b in blobs]

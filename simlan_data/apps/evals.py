@@ -424,7 +424,7 @@ def _pinned_group(case: Case, candidate: list[str]) -> str:
     for override in case.overrides:
         key = override.partition("=")[0].lstrip("+~")
         if key in groups:
-            return f"{override.lstrip('+~')}"
+            return override.lstrip("+~")
     return ""
 
 

@@ -59,7 +59,7 @@ def _goals_note(metrics: Mapping[str, float], ns: str, failed_recorded: int) -> 
 
 
 def _held(metrics: Mapping[str, float], ns: str) -> str:
-    """``"; the safety layer held it at the end (cause)"`` when a stop still held ``ns``, else ``""``."""
+    """``"; a safety stop held it at the end (cause; ...)"`` when a stop still held ``ns``, else ``""``."""
     if not metrics.get(f"safety.{ns}.stopped_at_end"):
         return ""
     prefix = f"safety.{ns}.stopped_at_end."

@@ -420,10 +420,10 @@ def evaluate(
         out[p + "max_latency_s"] = max(lat_ns) if lat_ns else float("nan")
         out[p + "max_stop_distance_m"] = max(dists) if dists else 0.0
         out[p + "min_clearance_m"] = min(agent_gap, zgap)
-        last = mine[-1] if mine else None
-        out[p + "stopped_at_end"] = float(last is not None and last.action == STOP)
-        if last is not None and last.action == STOP:  # what still held it when the run ended
-            out[f"{p}stopped_at_end.{last.cause}"] = 1.0
+        held = mine[-1] if mine and mine[-1].action == STOP else None  # still stopped when the run ended
+        out[p + "stopped_at_end"] = float(held is not None)
+        if held is not None:
+            out[f"{p}stopped_at_end.{held.cause}"] = 1.0
     out.update(tally.metrics(prefix, budget_s))
     return out, tally.violations, tally.hazards
 

@@ -34,7 +34,7 @@ Layout (every key is checked; a bad one is one error line naming the place)::
     robustness:                  # robustness sweeps: simlan_data/evaluation/robustness.py
 
 SOURCE is ``run`` (the run's metrics.json) or a replay algorithm of the case. A requirement is
-``replay:NAME`` (a registered replay algorithm), ``conf:GROUP/OPTION`` (a config file) or
+``replay:NAME`` (a registered replay algorithm), ``conf:GROUP/OPTION`` (a config file),
 ``config:KEY.PATH`` (a key of the typed config) or ``module:NAME[=EXTRA]`` (an importable Python
 module, from the package's extra EXTRA: ``module:torch=posemap``); the case's replay algorithms and its
 ``GROUP=OPTION`` overrides are required implicitly.
