@@ -2,12 +2,14 @@
 
     python benchmarks/fleet_kinematic.py [--robots 4,8,12] [--seeds 100] [--tasks 3]
                                          [--limit-s 900] [--jobs 2] [--json FILE]
+                                         [--cameras gpss_all] [--types jackal]
 
 For every fleet size and seed: the missions of ``scenario=fleet`` (simlan_data/config/missions.py,
 the same generator and seed as the run), the real layout's occupancy grid, and
 ``algorithms/coordinator=fleet`` driving a kinematic fleet (simlan_data/evaluation/fleet_kinematic.py:
 robots follow the coordinator's routes exactly at their mission speed, no physics, no cameras,
-ground-truth poses). Counts goals reached, missions done, deadlocks (the coordinator's, and the recording's definition of
+ground-truth poses; with ``--cameras`` the missions and the route graph lie on the floor those
+cameras see, as in a run whose robots steer on them). Counts goals reached, missions done, deadlocks (the coordinator's, and the recording's definition of
 simlan_data/evaluation/fleet_metrics.py on the trace), waits, failures,
 the smallest footprint-to-footprint gap, makespan, tasks per hour and the planning time (wall, and
 CPU time: on a shared machine the wall time is an upper bound, the CPU time compares runs). This
@@ -29,15 +31,30 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine
+from simlan_data.config.validation import compose_config
 from simlan_data.evaluation.fleet_kinematic import mission_fleet
+from simlan_data.geometry.calibration import load_calibration
 
 SAFETY_M = 0.6  # navigation.safety_distance_m's default
 DWELL_S = 2.0  # at each goal (a pickup, a drop-off, a charge)
 
 
-def one(robots: int, seed: int, tasks: int, limit_s: float) -> dict:
+def cameras_of(name: str) -> list:
+    """The cameras of ``cameras=NAME`` (conf/cameras) at their configured resolution, or none."""
+    if not name:
+        return []
+    cfg = compose_config([f"cameras={name}"])
+    return [
+        load_calibration(i).camera.scaled(cfg.cameras.width, cfg.cameras.height) for i in cfg.cameras.ids
+    ]
+
+
+def one(robots: int, seed: int, tasks: int, limit_s: float, cameras: str = "", types: str = "") -> dict:
     """One seeded mission set to the end (or ``limit_s``)."""
-    fleet, kinds = mission_fleet(robots, seed, tasks=tasks, dwell_s=DWELL_S, safety_m=SAFETY_M)
+    fleet, kinds = mission_fleet(
+        robots, seed, tasks=tasks, dwell_s=DWELL_S, safety_m=SAFETY_M, cameras=cameras_of(cameras),
+        types=types.split(",") if types else None,
+    )  # fmt: skip
     goals = fleet.goals_left()
     t0, c0 = time.perf_counter(), time.process_time()
     fleet.run(limit_s)
@@ -79,10 +96,13 @@ def summary(rows: list[dict]) -> dict[int, dict]:
     return out
 
 
-def figures(table: dict[int, dict], limit_s: float) -> list[dict]:
+def figures(table: dict[int, dict], limit_s: float, cameras: str = "", types: str = "") -> list[dict]:
     """One BENCHMARKS row per fleet size (benchmarks/summary.py)."""
+    tag = (f"_{cameras}" if cameras else "") + (f"_{types.replace(',', '_')}" if types else "")
+    where = f", on the floor the {cameras} cameras see" if cameras else ""
+    mix = f", {types} only" if types else ""
     return [
-        {"id": f"fleet_kinematic_{n}", "figure": f"fleet coordinator alone, {n} robots, seeded missions (kinematic robots): missions done",
+        {"id": f"fleet_kinematic{tag}_{n}", "figure": f"fleet coordinator alone, {n} robots{mix}, seeded missions (kinematic robots{where}): missions done",
          "value": row["missions_done"], "unit": f"of {row['runs']}", "target": "every task done, 0 deadlocks",
          "baseline": "none in this benchmark: gpss and independent robots give no routes to drive; the closed loop compares them",
          "note": f"goals {row['goals_reached']}, deadlocks {row['deadlocks']} (coordinator's count; the recording's "
@@ -104,11 +124,13 @@ def main() -> None:
     ap.add_argument("--limit-s", type=float, default=900.0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--cameras", default="", help="e.g. gpss_all: missions and routes on the floor they see")
+    ap.add_argument("--types", default="", help="robot types of the mix, e.g. jackal (default: the fleet's)")
     args = ap.parse_args()
     cases = [(int(n), s) for n in args.robots.split(",") for s in range(args.seeds)]
     rows = []
     with ProcessPoolExecutor(args.jobs) as pool:
-        futures = [pool.submit(one, n, s, args.tasks, args.limit_s) for n, s in cases]
+        futures = [pool.submit(one, n, s, args.tasks, args.limit_s, args.cameras, args.types) for n, s in cases]
         for f in futures:
             r = f.result()
             rows.append(r)
@@ -118,7 +140,10 @@ def main() -> None:
         print(n, row, flush=True)
     command = (
         f"python benchmarks/fleet_kinematic.py --robots {args.robots} --seeds {args.seeds}"
-        f" --tasks {args.tasks} --limit-s {args.limit_s:g} --json FILE"
+        f" --tasks {args.tasks} --limit-s {args.limit_s:g}"
+        + (f" --cameras {args.cameras}" if args.cameras else "")
+        + (f" --types {args.types}" if args.types else "")
+        + " --json FILE"
     )
     result = {
         "command": command,
@@ -126,7 +151,7 @@ def main() -> None:
         "date": datetime.date.today().isoformat(),
         "history": "docs/benchmarks/fleet.md",
         "summary": table,
-        "figures": figures(table, args.limit_s),
+        "figures": figures(table, args.limit_s, args.cameras, args.types),
         "rows": rows,
     }
     if args.json:

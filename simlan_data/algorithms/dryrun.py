@@ -10,12 +10,15 @@ Pure numpy/shapely.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from simlan_data.algorithms.coordinator import footprint_polygon
 from simlan_data.algorithms.occupancy import OccupancyGrid
+from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.algorithms.safety import SafetyEvent, SafetyLayer, TreesConfig
 from simlan_data.algorithms.stack import AgentPlan, GpssStack, NavigationParams
 from simlan_data.constants import NS_PER_S
@@ -48,9 +51,11 @@ def dry_run(
     control_hz: float = 20.0,
     accel_mps2: float = 1.0,
     safety: TreesConfig | None = None,
+    coordinator: Callable[[CoordinatorContext], Any] | None = None,
 ) -> DryRunResult:
     """Drive ``agents`` (diff-drive robots and walkers) for ``duration_s`` with the GPSS stack
-    (and its safety layer, on ground truth, if ``safety`` is given)."""
+    (and its safety layer, on ground truth, if ``safety`` is given; ``coordinator``: another
+    coordinator than the built-in ``gpss``, built from its context as ``GpssStack`` builds it)."""
     dt = 1.0 / control_hz
     stack = GpssStack(
         agents,
@@ -58,6 +63,7 @@ def dry_run(
         grid,
         nav=nav,
         source="ground_truth",
+        coordinator=coordinator,
         safety=None if safety is None else (lambda ctx: SafetyLayer(safety, ctx)),
         control_period_s=dt,
     )

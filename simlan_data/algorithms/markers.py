@@ -198,20 +198,37 @@ def markers_in_view(
     for cam in cameras:
         if cam.position[2] <= mz or visible.all():
             continue
-        uv, ok = cam.project(corners.reshape(-1, 3))
-        uv = uv.reshape(n, 4, 2)
+        # only corners whose rays fall near the image are projected (OpenCV's distortion is the
+        # cost: the floor of a hall is mostly outside any one camera's view)
+        pts = cam.world_to_camera(corners.reshape(-1, 3)).reshape(n, 4, 3)
+        z = pts[..., 2]
+        xy = pts[..., :2] / np.where(z > 1e-9, z, 1.0)[..., None]
+        x0, x1, y0, y1 = cam.normalized_bounds
+        near = (
+            (z > 1e-9).all(axis=1)
+            & (xy[..., 0] >= x0).all(axis=1)
+            & (xy[..., 0] <= x1).all(axis=1)
+            & (xy[..., 1] >= y0).all(axis=1)
+            & (xy[..., 1] <= y1).all(axis=1)
+            & ~visible
+        )
+        if not near.any():
+            continue
+        cand = np.flatnonzero(near)
+        uv, ok = cam.project_camera_points(pts[cand].reshape(-1, 3))
+        uv = uv.reshape(-1, 4, 2)
         inside = (
-            ok.reshape(n, 4).all(axis=1)
+            ok.reshape(-1, 4).all(axis=1)
             & (uv >= 0).all(axis=(1, 2))
             & (uv[..., 0] <= cam.width - 1).all(axis=1)
             & (uv[..., 1] <= cam.height - 1).all(axis=1)
-            & ~visible
         )
         if not inside.any():
             continue
-        rows = np.flatnonzero(inside)
-        _, ok_px = cam.undistort_pixels(uv[rows].reshape(-1, 2))
-        side = np.linalg.norm(uv[rows] - np.roll(uv[rows], 1, axis=1), axis=2).mean(axis=1)
+        rows = cand[inside]
+        uv = uv[inside]
+        _, ok_px = cam.undistort_pixels(uv.reshape(-1, 2))
+        side = np.linalg.norm(uv - np.roll(uv, 1, axis=1), axis=2).mean(axis=1)
         visible[rows] = ok_px.reshape(-1, 4).all(axis=1) & (side >= MIN_SIDE_PX)
     return visible
 

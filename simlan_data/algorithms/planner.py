@@ -2,12 +2,16 @@
 
 Pure numpy. A cell is traversable if its clearance (distance to the nearest obstacle) is at least
 the robot's radius; within a comfort band the step cost grows, so paths keep to the middle of
-aisles instead of hugging shelves.
+aisles instead of hugging shelves. With the floor the cameras see (``coverage.SeenFloor``, per
+heading), entering a cell facing a way no camera sees the robot's marker costs ``unseen_cost`` per
+metre more: a robot that steers on the cameras keeps to the floor where they localize it, and
+crosses unseen floor only where no other way exists.
 """
 
 from __future__ import annotations
 
 import heapq
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +20,8 @@ from numpy.typing import NDArray
 from simlan_data.algorithms.occupancy import OccupancyGrid
 
 _SQRT2 = float(np.sqrt(2.0))
+# the heading bin (coverage.HEADINGS, 45 degrees each) of a move (d_row, d_col): rows grow with y
+_HEADING = {(dr, dc): round(math.atan2(dr, dc) / (math.pi / 4)) % 8 for dr in (-1, 0, 1) for dc in (-1, 0, 1)}
 _MOVES = [
     (-1, 0, 1.0),
     (1, 0, 1.0),
@@ -43,7 +49,14 @@ class GridPlanner:
     """A* for a robot of a given radius on a static occupancy grid."""
 
     def __init__(
-        self, grid: OccupancyGrid, *, radius_m: float, comfort_m: float = 1.0, comfort_weight: float = 2.0
+        self,
+        grid: OccupancyGrid,
+        *,
+        radius_m: float,
+        comfort_m: float = 1.0,
+        comfort_weight: float = 2.0,
+        seen: NDArray[np.bool_] | None = None,
+        unseen_cost: float = 0.0,
     ) -> None:
         self.grid = grid
         self.radius_m = radius_m
@@ -52,6 +65,15 @@ class GridPlanner:
         # extra cost per metre walked near obstacles (0 beyond radius + comfort)
         self.penalty = np.clip((radius_m + comfort_m - clearance) / comfort_m, 0.0, 1.0) * comfort_weight
         self.clearance = clearance
+        # (8, rows, cols) SeenFloor.by_heading, or None: every cell counts as seen
+        self.unseen = None if seen is None or unseen_cost <= 0 else ~np.asarray(seen, dtype=bool)
+        # per heading bin: the cost per metre of entering a cell (1 + comfort penalty + unseen)
+        base = 1.0 + self.penalty
+        self._cost = (
+            [base] * 8
+            if self.unseen is None
+            else [base + (unseen_cost * u).astype(base.dtype) for u in self.unseen]
+        )
 
     def nearest_free(self, cell: tuple[int, int], max_radius_cells: int = 20) -> tuple[int, int] | None:
         """The closest traversable cell to ``cell`` (for starts/goals that touch the inflation)."""
@@ -104,6 +126,7 @@ class GridPlanner:
         closed = np.zeros(free.shape, dtype=bool)
         expanded = 0
         max_cost = max_length_m / self.grid.resolution_m
+        moves = [(dr, dc, step, self._cost[_HEADING[dr, dc]]) for dr, dc, step in _MOVES]
         while heap:
             f, cost, r, c = heapq.heappop(heap)
             if f > max_cost:
@@ -114,13 +137,13 @@ class GridPlanner:
             expanded += 1
             if (r, c) == goal:
                 break
-            for dr, dc, step in _MOVES:
+            for dr, dc, step, cost_per_m in moves:
                 nr, nc = r + dr, c + dc
                 if nr < 0 or nc < 0 or nr >= rows or nc >= cols or closed[nr, nc] or not free[nr, nc]:
                     continue
                 if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
                     continue  # no corner cutting
-                ng = cost + step * (1.0 + self.penalty[nr, nc])
+                ng = cost + step * cost_per_m[nr, nc]
                 if ng < g[nr, nc]:
                     g[nr, nc] = ng
                     parent[nr, nc] = (r, c)
@@ -144,26 +167,54 @@ class GridPlanner:
         return Plan(points, length, expanded)
 
     def _segment_ok(
-        self, a: NDArray[np.float64], b: NDArray[np.float64], free: NDArray[np.bool_], max_penalty: float
+        self,
+        a: NDArray[np.float64],
+        b: NDArray[np.float64],
+        free: NDArray[np.bool_],
+        max_penalty: float,
+        unseen_ok: bool = True,
     ) -> bool:
         n = max(2, int(np.ceil(np.linalg.norm(b - a) / (0.5 * self.grid.resolution_m))))
+        unseen = None
+        if self.unseen is not None and not unseen_ok:
+            unseen = self.unseen[round(math.atan2(b[1] - a[1], b[0] - a[0]) / (math.pi / 4)) % 8]
         for t in np.linspace(0.0, 1.0, n):
             cell = self.grid.to_cell(a + t * (b - a))
             if not self.grid.inside(cell) or not free[cell] or self.penalty[cell] > max_penalty:
                 return False
+            if unseen is not None and t > 0.0 and unseen[cell]:
+                return False
         return True
+
+    def _unseen_points(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Per path point: is it entered (from the point before) facing a way no camera sees?"""
+        out = np.zeros(len(points), dtype=bool)
+        if self.unseen is None:
+            return out
+        for k in range(1, len(points)):
+            d = points[k] - points[k - 1]
+            cell = self.grid.to_cell(points[k])
+            if self.grid.inside(cell):
+                out[k] = self.unseen[round(math.atan2(d[1], d[0]) / (math.pi / 4)) % 8][cell]
+        return out
 
     def _smooth(self, points: NDArray[np.float64], free: NDArray[np.bool_]) -> NDArray[np.float64]:
         """Drop intermediate points while the straight segment stays free and no closer to
         obstacles than the grid path it replaces (string pulling; a shortcut may not cut a corner
-        the search kept away from, but may run straight through a narrow gap)."""
+        the search kept away from, but may run straight through a narrow gap), nor onto floor the
+        cameras do not see where the path it replaces is seen."""
         penalty = np.array([self.penalty[self.grid.to_cell(p)] for p in points])
+        unseen = self._unseen_points(points)
         out = [points[0]]
         i = 0
         while i < len(points) - 1:
             j = len(points) - 1
             while j > i + 1 and not self._segment_ok(
-                points[i], points[j], free, float(penalty[i : j + 1].max()) + 1e-6
+                points[i],
+                points[j],
+                free,
+                float(penalty[i : j + 1].max()) + 1e-6,
+                bool(unseen[i + 1 : j + 1].any()),
             ):
                 j = max(i + 1, (i + j) // 2) if j - i > 8 else j - 1
             out.append(points[j])

@@ -75,11 +75,15 @@ class LocalizerContext:
 
 @dataclass(frozen=True)
 class CoordinatorContext:
-    """What a coordinator is built with: the fleet's safety distance and the occupancy grid the
-    robots plan on (None where a caller has none; the built-in ``gpss`` does not need it)."""
+    """What a coordinator is built with: the fleet's safety distance, the occupancy grid the
+    robots plan on (None where a caller has none; the built-in ``gpss`` does not need it) and,
+    where robots steer on the cameras, the floor the cameras see: ``seen[k, row, col]`` is true
+    where every robot of the run facing ``k * 45`` degrees has its marker in some camera's view
+    (``coverage.SeenFloor.by_heading``; None: every floor counts as seen)."""
 
     safety_distance_m: float
     grid: OccupancyGrid | None = None
+    seen: NDArray[np.bool_] | None = None
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from shapely.ops import unary_union
 
 from simlan_data.algorithms.aruco_localizer import ArucoLocalizer
 from simlan_data.algorithms.coordinator import Decision, Intent, footprint_polygon, swept_claim
+from simlan_data.algorithms.coverage import SeenFloor, seen_floor
 from simlan_data.algorithms.follower import FollowerParams, PursuitParams, WaypointFollower
 from simlan_data.algorithms.gpss_coordinator import GpssCoordinator, GpssCoordinatorConfig
 from simlan_data.algorithms.localization import ImageSearch, LocalizerParams, PoseEstimate
@@ -94,6 +95,7 @@ class NavigationParams:
     max_yaw_rate_rps: float = 0.8
     coordination: bool = True
     safety_distance_m: float = 0.6
+    unseen_cost: float = 25.0  # per metre of floor where no camera sees the robot (camera steering)
 
 
 @dataclass
@@ -118,6 +120,15 @@ def _marker_mounts(agents: list[AgentPlan]) -> list[MarkerMount]:
         for a in agents
         if a.kind.marker_xyz is not None and a.marker_id is not None and a.kind.drive == "diff"
     ]
+
+
+def _every(floors: Iterable[SeenFloor]) -> SeenFloor:
+    """The floor seen for every one of ``floors`` (a robot of each mount)."""
+    out: SeenFloor | None = None
+    for f in floors:
+        out = f if out is None else out & f
+    assert out is not None
+    return out
 
 
 def robot_footprints(agents: Iterable[AgentPlan]) -> dict[str, Footprint]:
@@ -160,6 +171,7 @@ class GpssStack:
         self.grid, self.nav, self.source = grid, nav, source
         mounts = _marker_mounts(agents)
         self.cameras = cameras
+        self.seen = self._seen_floors(agents)
         self.localized = [m.namespace for m in mounts]  # the robots the localizer must find
         make = localizer or (lambda ctx: ArucoLocalizer(LocalizerParams(), ctx))
         self.localizer = make(LocalizerContext(cameras, mounts))
@@ -167,7 +179,11 @@ class GpssStack:
         self._frames: dict[str, CameraFrame] = {}
         make_coordinator = coordinator or (lambda ctx: GpssCoordinator(GpssCoordinatorConfig(), ctx))
         self.coordinator = make_coordinator(
-            CoordinatorContext(safety_distance_m=nav.safety_distance_m, grid=grid)
+            CoordinatorContext(
+                safety_distance_m=nav.safety_distance_m,
+                grid=grid,
+                seen=None if not self.seen else _every(self.seen.values()).by_heading,
+            )
         )
         self._granted: set[str] = set()  # robots the coordinator let drive at the last decision
         # the last pose GPSS knew of every robot: its spawn pose until the cameras first see it
@@ -177,16 +193,41 @@ class GpssStack:
         self._speeds: dict[str, tuple[float, float]] = {}  # last command per robot (ground-truth source)
         self._build_person_detector(people)
 
+    def _seen_floors(self, agents: list[AgentPlan]) -> dict[tuple[float, float, float], SeenFloor]:
+        """Per marker mount of the robots: the floor where the cameras see it (``coverage``), when
+        robots steer on the cameras and ``unseen_cost`` > 0; else none (every floor counts)."""
+        if self.source != "camera" or not self.cameras or self.nav.unseen_cost <= 0:
+            return {}
+        robots = [a for a in agents if a.kind.drive == "diff" and a.kind.marker_xyz is not None]
+        if not robots:
+            return {}
+        smallest = min(a.kind.half_width_m for a in robots) + self.nav.clearance_m
+        free = self.grid.clearance_m() >= smallest
+        return {
+            m: seen_floor(self.grid, self.cameras.values(), m, marker_size_m=MARKER_SIZE_M, free=free)
+            for m in sorted({a.kind.marker_xyz for a in robots if a.kind.marker_xyz is not None})
+        }
+
     def _build_navigators(self, agents: list[AgentPlan]) -> None:
-        """Give every robot a navigator (planners shared per radius) and every person a walker."""
+        """Give every robot a navigator (planners shared per radius and marker mount) and every
+        person a walker."""
         nav = self.nav
         self.navigators: dict[str, Navigator] = {}
         self.walkers: dict[str, WaypointFollower] = {}
-        planners: dict[float, GridPlanner] = {}
+        planners: dict[tuple[float, Any], GridPlanner] = {}
         for a in agents:
             if a.kind.drive == "diff":
                 radius = round(a.kind.half_width_m + nav.clearance_m, 3)
-                planner = planners.setdefault(radius, GridPlanner(self.grid, radius_m=radius))
+                seen = self.seen.get(a.kind.marker_xyz) if a.kind.marker_xyz is not None else None
+                key = (radius, a.kind.marker_xyz if seen is not None else None)
+                if key not in planners:
+                    planners[key] = GridPlanner(
+                        self.grid,
+                        radius_m=radius,
+                        seen=None if seen is None else seen.by_heading,
+                        unseen_cost=nav.unseen_cost,
+                    )
+                planner = planners[key]
                 pursuit = PursuitParams(
                     max_speed_mps=min(a.speed_mps, a.kind.max_speed_mps),
                     min_lookahead_m=0.6 * nav.lookahead_m,

@@ -30,7 +30,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -39,6 +38,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.algorithms.coverage import SeenFloor, connected_seen, seen_floor
 from simlan_data.algorithms.markers import markers_in_view
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.planner import GridPlanner, PlanningError
@@ -55,6 +55,7 @@ MARGIN_M = 0.15  # spots keep the circumscribed radius plus this from obstacles
 RACK_BAND_M = 0.8  # pickups lie within this of the closest spot to a rack
 SPACING_M = 0.5  # free floor between two homes' (or a home's and a dock's) circumscribed circles
 MAX_ROBOTS = 200
+DRAWS = 20  # draws per seed until the homes, docks and a pickup fit apart
 MAX_PEOPLE = 50
 PERSON_STOPS = 3  # a person walks from home through this many spots and back, again and again
 PERSON = "humanoid"
@@ -214,10 +215,11 @@ def generate_missions(
 ) -> Missions:
     """The fleet's agents (type, home pose, goals, speed) from ``spec`` and ``seed``, deterministically.
 
-    With ``cameras`` (robots that steer on the cameras' estimates), every spot is one where each
-    robot type of the mix is seen by a camera at most headings (``_seen``): a robot that starts
-    or stops where no camera sees its marker is never localized and never moves. (The floor
-    between spots need not be seen: that would leave only the main aisle under the GPSS cameras.)
+    With ``cameras`` (robots that steer on the cameras' estimates), every spot lies in one connected
+    part of the floor where each robot type of the mix is seen by a camera at every heading
+    (``_seen_spots``): a robot that drives, starts or stops where no camera sees its marker is
+    stopped by the safety layer and never localized again. Under the GPSS cameras that part is
+    mostly the main aisle, so it holds fewer robots than the whole floor.
 
     Raises:
         ConfigError: no robots, or the area's floor cannot hold the robots, docks and chargers apart.
@@ -234,15 +236,27 @@ def generate_missions(
     planner_m = max(k.half_width_m for k in kinds) + clearance_m
     grid, clearance = _floor(layout, fidelity, resolution_m)
     need = max(widest + MARGIN_M, planner_m)
-    spots = _spots(grid, clearance, need, spec.area_m)
-    if cameras:  # spots where the cameras see the robots (the floor between them need not be)
-        seen = _seen_cached(grid, need, clearance, cameras, kinds, spec.area_m)
-        spots = spots[[bool(seen[grid.to_cell(xy)]) for xy in spots[:, :2]]]
-    rng = np.random.default_rng([seed, 23])  # (23: the issue; any constant keeps seeds independent)
-    taken: list[tuple[float, float, float]] = []
     shared = spec.docks + spec.chargers
-    stations = _pick_apart(rng, spots, [widest + SPACING_M] * shared, taken)
-    homes = _pick_apart(rng, spots, [k.radius_m + SPACING_M / 2 for k in kinds], taken)
+    spots = (
+        _seen_spots(grid, clearance, need, planner_m, cameras, kinds, spec.area_m)
+        if cameras
+        else _spots(grid, clearance, need, spec.area_m)
+    )
+    # a draw that leaves no room (homes, docks, a pickup) is drawn again from the same seed:
+    # every seed of a sweep gets missions where the floor holds them at all
+    for attempt in range(DRAWS):
+        # (23: the issue; any constant keeps seeds independent; the first draw as it always was)
+        rng = np.random.default_rng([seed, 23] if attempt == 0 else [seed, 23, attempt])
+        taken: list[tuple[float, float, float]] = []
+        stations = _pick_apart(rng, spots, [widest + SPACING_M] * shared, taken)
+        homes = _pick_apart(rng, spots, [k.radius_m + SPACING_M / 2 for k in kinds], taken)
+        near_rack = spots[spots[:, 2] <= spots[:, 2].min() + RACK_BAND_M] if len(spots) else spots
+        for x, y, r in taken:  # a pickup keeps clear of homes (robots park there) and shared spots
+            near_rack = near_rack[
+                np.hypot(near_rack[:, 0] - x, near_rack[:, 1] - y) >= r + widest + SPACING_M
+            ]
+        if len(stations) == shared and len(homes) == spec.robots and len(near_rack):
+            break
     if len(stations) < shared or len(homes) < spec.robots:
         raise _bad(
             "fleet.robots",
@@ -257,10 +271,6 @@ def generate_missions(
             "use fewer robots (or smaller types, or a larger fleet.area_m"
             + (", or more cameras)" if cameras else ")"),
         )
-    docks, chargers = stations[: spec.docks], stations[spec.docks :]
-    near_rack = spots[spots[:, 2] <= spots[:, 2].min() + RACK_BAND_M]
-    for x, y, r in taken:  # a pickup keeps clear of homes (robots park there) and shared spots
-        near_rack = near_rack[np.hypot(near_rack[:, 0] - x, near_rack[:, 1] - y) >= r + widest + SPACING_M]
     if not len(near_rack):
         raise _bad(
             "fleet.area_m",
@@ -268,6 +278,7 @@ def generate_missions(
             "no pickup spot left clear of the homes and docks",
             "use fewer robots or a larger area",
         )
+    docks, chargers = stations[: spec.docks], stations[spec.docks :]
     agents: dict[str, dict[str, Any]] = {}
     for i, (kind, home) in enumerate(zip(kinds, homes, strict=True)):
         goals: list[list[float]] = []
@@ -301,71 +312,38 @@ def generate_missions(
     return Missions(agents, [list(d) for d in docks], [list(c) for c in chargers])
 
 
-SEEN_STEP_CELLS = 2  # the cameras' view is tested on every 2nd cell (0.2 m at the default resolution)
-SEEN_YAWS = 8  # headings tested per cell
-SEEN_SHARE = 0.5  # seen at this share of them at least
-
-
-_SEEN: dict[tuple[Any, ...], NDArray[np.bool_]] = {}  # the cameras' view does not depend on the seed
-
-
-def _seen_cached(
+def _seen_spots(
     grid: OccupancyGrid,
-    need_m: float,
     clearance: NDArray[np.float32],
+    need_m: float,
+    drive_m: float,
     cameras: tuple[CameraModel, ...],
     kinds: list[AgentType],
     area: list[float],
-) -> NDArray[np.bool_]:
-    """``_seen`` of the cells with ``need_m`` clearance, computed once per layout grid, cameras,
-    marker mounts and area (every seed of a sweep asks the same)."""
-    key = (
-        grid.origin_xy_m,
-        grid.resolution_m,
-        zlib.crc32(grid.occupied.tobytes()),
-        round(need_m, 6),
-        tuple((c.camera_id, c.width, c.height, tuple(np.round(c.position, 6))) for c in cameras),
-        tuple(sorted({k.marker_xyz for k in kinds if k.marker_xyz is not None})),
-        tuple(area),
-    )
-    if key not in _SEEN:
-        if len(_SEEN) > 8:
-            _SEEN.clear()
-        _SEEN[key] = _seen(grid, clearance >= need_m, cameras, kinds, area)
-    return _SEEN[key]
-
-
-def _seen(
-    grid: OccupancyGrid,
-    free: NDArray[np.bool_],
-    cameras: tuple[CameraModel, ...],
-    kinds: list[AgentType],
-    area: list[float],
-) -> NDArray[np.bool_]:
-    """Cells where every type in ``kinds`` with a marker has it seen by a camera at ``SEEN_SHARE``
-    of the headings at least (``markers_in_view``; a marker sits up to 0.8 m off the robot's
-    centre), tested on the ``free`` cells of a coarser grid in ``area`` and spread to their
-    neighbours."""
-    rows, cols = grid.occupied.shape
-    coarse = np.argwhere(free[::SEEN_STEP_CELLS, ::SEEN_STEP_CELLS]) * SEEN_STEP_CELLS
-    xy = grid.to_xy(coarse)
-    keep = _in_area(xy, area)
-    coarse, xy = coarse[keep], xy[keep]
-    ok = np.ones(len(xy), dtype=bool)
-    yaws = np.linspace(-math.pi, math.pi, SEEN_YAWS, endpoint=False)
+) -> NDArray[np.float64]:
+    """``_spots`` for robots that steer on the cameras: cells with ``need_m`` clearance in ``area``
+    that lie in one connected part of the floor where every type of the mix is seen at every
+    heading (``coverage.connected_seen``, driven with ``drive_m`` clearance: the widest robot's
+    planner radius), the part that holds most of them. A robot driving between two spots of
+    different parts would lose the cameras on the way and stand for good."""
+    drive = clearance >= drive_m
+    seen: SeenFloor | None = None
     for marker in sorted({k.marker_xyz for k in kinds if k.marker_xyz is not None}):
-        count = np.zeros(len(xy), dtype=int)
-        for yaw in yaws:
-            poses = np.column_stack([xy, np.full(len(xy), yaw)])
-            count += markers_in_view(cameras, marker, poses, size_m=MARKER_SIZE_M)
-        ok &= count >= SEEN_SHARE * SEEN_YAWS
-    seen = np.zeros((rows, cols), dtype=bool)
-    for dr in range(SEEN_STEP_CELLS):
-        for dc in range(SEEN_STEP_CELLS):
-            r, c = coarse[ok, 0] + dr, coarse[ok, 1] + dc
-            inside = (r < rows) & (c < cols)
-            seen[r[inside], c[inside]] = True
-    return seen
+        one = seen_floor(grid, cameras, marker, marker_size_m=MARKER_SIZE_M, free=drive)
+        seen = one if seen is None else seen & one
+    if seen is None:  # no robot carries a marker: nothing to see
+        return _spots(grid, clearance, need_m, area)
+    labels = connected_seen(seen, drive)
+    cells = np.argwhere((clearance >= need_m) & (labels > 0))
+    xy = grid.to_xy(cells) if len(cells) else np.zeros((0, 2))
+    inside = _in_area(xy, area)
+    cells, xy = cells[inside], xy[inside]
+    if not len(cells):
+        return np.zeros((0, 3))
+    part = labels[cells[:, 0], cells[:, 1]]
+    best = int(np.argmax(np.bincount(part)))
+    keep = part == best
+    return np.column_stack([xy[keep], clearance[cells[keep, 0], cells[keep, 1]]])
 
 
 def _seen_heading(

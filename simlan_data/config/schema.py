@@ -331,11 +331,16 @@ class NavigationConfig:
     max_yaw_rate_rps: float = 0.8
     coordination: bool = True
     safety_distance_m: float = 0.6  # robots keep at least this between footprints
+    unseen_cost: float = 25.0  # camera steering: extra plan cost per metre where no camera sees the robot (0: off)
 
     def __post_init__(self) -> None:
         if _incomplete(self):
             return
         _choice("navigation.map", self.map, ("world", "simlan"))
+        if not (self.unseen_cost >= 0 and np.isfinite(self.unseen_cost)):
+            raise _bad(
+                "navigation.unseen_cost", self.unseen_cost, "must be a finite number >= 0", "use 25 (0: off)"
+            )
         if not 0.02 <= self.resolution_m <= 0.5:
             raise _bad("navigation.resolution_m", self.resolution_m, "must be within 0.02..0.5 m", "use 0.1")
         for name in (

@@ -10,7 +10,7 @@ simulator's (tests/test_fleet_coordinator.py, benchmarks/fleet_kinematic.py).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,6 +19,7 @@ import polars as pl
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.coordinator import Intent
+from simlan_data.algorithms.coverage import seen_floor
 from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator
 from simlan_data.algorithms.occupancy import grid_from_world
 from simlan_data.algorithms.roles import CoordinatorContext
@@ -26,8 +27,11 @@ from simlan_data.algorithms.safety.geometry import Footprint, footprint_polygon
 from simlan_data.config.missions import MissionsConfig, generate_missions
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.fleet_metrics import Status, fleet_metrics
-from simlan_data.world.agent_types import AGENT_TYPES, AgentType
+from simlan_data.geometry.camera import CameraModel
+from simlan_data.world.agent_types import AGENT_TYPES, MARKER_SIZE_M, AgentType
 from simlan_data.world.layout import load_layout
+
+CLEARANCE_M = 0.4  # navigation.clearance_m's default (the smallest planner radius's margin)
 
 
 @dataclass
@@ -165,15 +169,33 @@ class KinematicFleet:
 
 
 def mission_fleet(
-    robots: int, seed: int, *, tasks: int = 3, dwell_s: float = 2.0, safety_m: float = 0.6
+    robots: int,
+    seed: int,
+    *,
+    tasks: int = 3,
+    dwell_s: float = 2.0,
+    safety_m: float = 0.6,
+    cameras: Sequence[CameraModel] = (),
+    types: Sequence[str] | None = None,
 ) -> tuple[KinematicFleet, dict[str, AgentType]]:
     """The seeded missions of ``scenario=fleet`` (same generator and seed as a run) on the real
     layout's occupancy grid, driven by ``algorithms/coordinator=fleet``: the kinematic fleet and each
-    robot's agent type. ``safety_m``: navigation.safety_distance_m (its default)."""
-    missions = generate_missions(MissionsConfig(robots=robots, tasks=tasks), seed=seed)
+    robot's agent type. ``safety_m``: navigation.safety_distance_m (its default). With ``cameras``
+    (robots that steer on them, as in a run): missions on the floor they see, and the coordinator
+    given that floor as the run's stack gives it (``CoordinatorContext.seen``)."""
+    spec_cfg = MissionsConfig(robots=robots, tasks=tasks)
+    if types is not None:
+        spec_cfg = MissionsConfig(robots=robots, tasks=tasks, types=list(types))
+    missions = generate_missions(spec_cfg, seed=seed, cameras=tuple(cameras))
     grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
-    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(safety_m, grid))
     kinds = {n: AGENT_TYPES[a["type"]] for n, a in missions.agents.items()}
+    seen = None
+    if cameras:
+        free = grid.clearance_m() >= min(k.half_width_m for k in kinds.values()) + CLEARANCE_M
+        markers = sorted({k.marker_xyz for k in kinds.values() if k.marker_xyz is not None})
+        floors = [seen_floor(grid, cameras, m, marker_size_m=MARKER_SIZE_M, free=free) for m in markers]
+        seen = np.logical_and.reduce([f.by_heading for f in floors])
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(safety_m, grid, seen))
     spec = {
         n: (tuple(a["pose"]), [tuple(g) for g in a["goals"]], kinds[n].footprint_m, a["speed_mps"])
         for n, a in missions.agents.items()

@@ -106,6 +106,30 @@ class CameraModel:
         real = [r.real for r in roots if abs(r.imag) < 1e-12 and r.real > 0]
         return float(np.sqrt(min(real))) if real else float("inf")
 
+    @cached_property
+    def normalized_bounds(self) -> tuple[float, float, float, float]:
+        """(x0, x1, y0, y1): a box of ideal normalized coordinates that holds every ray reaching the
+        image (its border undistorted, 2 % wider; the valid radius's square where the border lies
+        beyond it). A point outside projects outside the image: a cheap test before OpenCV."""
+        w, h = self.width - 1.0, self.height - 1.0
+        t = np.linspace(0.0, 1.0, 65)
+        border = np.concatenate(
+            [
+                np.column_stack([t * w, 0 * t]),
+                np.column_stack([t * w, h + 0 * t]),
+                np.column_stack([0 * t, t * h]),
+                np.column_stack([w + 0 * t, t * h]),
+            ]
+        )
+        xy, ok = self.undistort_pixels(border)
+        r = self.valid_radius
+        if not ok.all() or not np.isfinite(xy).all():
+            return (-r, r, -r, r)
+        x0, y0 = xy.min(axis=0)
+        x1, y1 = xy.max(axis=0)
+        mx, my = 0.02 * (x1 - x0), 0.02 * (y1 - y0)
+        return (float(x0 - mx), float(x1 + mx), float(y0 - my), float(y1 + my))
+
     # ------------------------------------------------------------------------------ projection
     def world_to_camera(self, points_world: ArrayLike) -> FloatArray:
         return self.camera_from_world.apply(points_world)

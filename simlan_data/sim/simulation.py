@@ -239,6 +239,7 @@ class Simulation:
                 nav.max_yaw_rate_rps,
                 nav.coordination,
                 nav.safety_distance_m,
+                nav.unseen_cost,
             ),
             localizer=self._factory("localizer"),
             coordinator=self._factory("coordinator"),

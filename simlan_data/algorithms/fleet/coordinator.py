@@ -84,6 +84,7 @@ class FleetCoordinator:
                 "run it through GpssStack (it passes the grid), or build CoordinatorContext(grid=...)",
             )
         self.config, self.grid = config, grid
+        self.seen = getattr(context, "seen", None)  # the floor the cameras see (None: all)
         self.safety_m = context.safety_distance_m + config.safety_m
         self.graph: RouteGraph | None = None
         self.state = FleetState()
@@ -118,7 +119,8 @@ class FleetCoordinator:
 
     # ------------------------------------------------------------------ steps
     def _graph(self, intents: list[Intent]) -> RouteGraph:
-        """Build the route graph once, for the widest robot seen at the first tick."""
+        """Build the route graph once, for the widest robot seen at the first tick (on the floor the
+        cameras see, where robots steer on them)."""
         if self.graph is None:
             robots = [i for i in intents if i.yields] or intents
             half = max((max(abs(i.footprint_m[2]), abs(i.footprint_m[3])) for i in robots), default=0.5)
@@ -128,6 +130,7 @@ class FleetCoordinator:
                 radius_m=half + self.config.lane_clearance_m,
                 spacing_m=self.config.spacing_m,
                 reach_m=reach,
+                seen=self.seen,
             )
         return self.graph
 

@@ -8,7 +8,9 @@ between them keeps the robot's radius from every obstacle. The result is a sampl
 narrow passages plus a lattice of lanes over open floor.
 
 Each node keeps its clearance: a robot may turn in place only at a node whose clearance covers its
-swept circle (``RouteGraph.turnable``). Node kinds follow from the graph: ``end`` (one edge),
+swept circle (``RouteGraph.turnable``). Given the floor the cameras see (``coverage.SeenFloor``,
+per heading: robots that steer on the cameras), an edge is kept only where a robot driving it
+either way stays seen, and a robot turns in place only at a node seen at every heading. Node kinds follow from the graph: ``end`` (one edge),
 ``lane`` (two), ``junction`` (three or more: an intersection or a passing place).
 """
 
@@ -37,6 +39,7 @@ class RouteGraph:
     clearance_m: NDArray[np.float64]  # (N,) distance from each node to the nearest obstacle
     edges: NDArray[np.int64]  # (E, 2) node pairs, u < v
     radius_m: float  # the robot radius the graph was built for
+    seen_node: NDArray[np.bool_] | None = None  # (N,) seen at every heading (None: every node)
 
     @property
     def size(self) -> int:
@@ -107,7 +110,8 @@ class RouteGraph:
     def turnable(self, reach_m: float) -> NDArray[np.bool_]:
         """Nodes where a robot whose footprint reaches ``reach_m`` from its centre turns in place
         without sweeping into an obstacle."""
-        return self.clearance_m >= reach_m
+        ok = self.clearance_m >= reach_m
+        return ok if self.seen_node is None else ok & self.seen_node
 
     @cached_property
     def _turn_graphs(self) -> dict[tuple[float, float], TurnGraph]:
@@ -158,10 +162,16 @@ class RouteGraph:
 
 
 def build_route_graph(
-    grid: OccupancyGrid, *, radius_m: float, spacing_m: float, reach_m: float | None = None
+    grid: OccupancyGrid,
+    *,
+    radius_m: float,
+    spacing_m: float,
+    reach_m: float | None = None,
+    seen: NDArray[np.bool_] | None = None,
 ) -> RouteGraph:
     """The route graph of ``grid`` for robots of radius ``radius_m`` (centre at least that far from
-    obstacles); ``reach_m`` caps the clearance a node seeks (default: radius + half a block)."""
+    obstacles); ``reach_m`` caps the clearance a node seeks (default: radius + half a block);
+    ``seen`` (HEADINGS, rows, cols): the floor the cameras see per heading (None: all of it)."""
     clearance = grid.clearance_m().astype(np.float64)
     res = grid.resolution_m
     b = max(1, round(spacing_m / res))
@@ -184,14 +194,20 @@ def build_route_graph(
     xy = grid.to_xy(np.stack([cell_r, cell_c], axis=1))
     index = -np.ones((br, bc), dtype=np.int64)
     index[block_r, block_c] = np.arange(len(block_r))
-    edges = _free_edges(index, xy, clearance >= radius_m, grid)
-    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m)
+    edges = _free_edges(index, xy, clearance >= radius_m, grid, seen)
+    seen_node = None if seen is None else np.asarray(seen[:, cell_r, cell_c].all(axis=0))
+    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, seen_node)
 
 
 def _free_edges(
-    index: NDArray[np.int64], xy: NDArray[np.float64], free: NDArray[np.bool_], grid: OccupancyGrid
+    index: NDArray[np.int64],
+    xy: NDArray[np.float64],
+    free: NDArray[np.bool_],
+    grid: OccupancyGrid,
+    seen: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.int64]:
-    """Pairs of nodes in neighbouring blocks whose straight segment stays on free cells."""
+    """Pairs of nodes in neighbouring blocks whose straight segment stays on free cells (and on
+    cells ``seen`` facing along it both ways)."""
     pairs = []
     br, bc = index.shape
     for dr, dc in _NEIGHBOURS:
@@ -212,5 +228,12 @@ def _free_edges(
     inside = (rows >= 0) & (cols >= 0) & (rows < free.shape[0]) & (cols < free.shape[1])
     ok = inside.all(axis=1)
     ok[ok] = free[rows[ok].clip(0), cols[ok].clip(0)].all(axis=1)
+    if seen is not None:
+        bins = seen.shape[0]
+        d = q - p
+        k = np.round(np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi / bins)).astype(np.int64) % bins
+        for way in (k, (k + bins // 2) % bins):
+            idx = np.flatnonzero(ok)
+            ok[idx] = seen[way[idx, None], rows[idx].clip(0), cols[idx].clip(0)].all(axis=1)
     out = np.sort(cand[ok], axis=1)
     return out[np.lexsort((out[:, 1], out[:, 0]))]
