@@ -44,9 +44,7 @@ def cameras_of(name: str) -> list:
     if not name:
         return []
     cfg = compose_config([f"cameras={name}"])
-    return [
-        load_calibration(i).camera.scaled(cfg.cameras.width, cfg.cameras.height) for i in cfg.cameras.ids
-    ]
+    return [load_calibration(i).camera.scaled(cfg.cameras.width, cfg.cameras.height) for i in cfg.cameras.ids]
 
 
 def one(robots: int, seed: int, tasks: int, limit_s: float, cameras: str = "", types: str = "") -> dict:
@@ -130,7 +128,9 @@ def main() -> None:
     cases = [(int(n), s) for n in args.robots.split(",") for s in range(args.seeds)]
     rows = []
     with ProcessPoolExecutor(args.jobs) as pool:
-        futures = [pool.submit(one, n, s, args.tasks, args.limit_s, args.cameras, args.types) for n, s in cases]
+        futures = [
+            pool.submit(one, n, s, args.tasks, args.limit_s, args.cameras, args.types) for n, s in cases
+        ]
         for f in futures:
             r = f.result()
             rows.append(r)

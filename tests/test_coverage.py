@@ -83,22 +83,37 @@ def _samples(points: np.ndarray, step: float = 0.05) -> list[np.ndarray]:
     return out
 
 
-def test_the_route_graph_keeps_only_edges_seen_both_ways() -> None:
+def test_the_route_guide_counts_floor_no_camera_sees_as_longer() -> None:
+    """Arcs driven where no camera sees the robot that way weigh 1 + unseen_cost times their unseen
+    share in the route guide (per direction), so the guide goes round a blind band and still
+    reaches a goal inside it."""
     grid = _open_floor()
     east_blind = _seen_but(grid, (8.0, 12.0, 0.0, 7.0), range(1))  # unseen facing east only
     full = build_route_graph(grid, radius_m=0.7, spacing_m=1.0)
-    cut = build_route_graph(grid, radius_m=0.7, spacing_m=1.0, seen=east_blind)
-    assert len(cut.edges) < len(full.edges)
-    for u, v in cut.edges:  # no edge with a sample in the band (an east-west edge there is cut)
-        p, q = cut.xy[u], cut.xy[v]
-        if abs(q[1] - p[1]) < 1e-9:
-            mid = (p + q) / 2
-            assert not (8.2 <= mid[0] <= 11.8 and mid[1] < 6.8), (p, q)
-    # a robot turns in place only where every heading is seen
-    turn = cut.turnable(0.8)
-    band = (cut.xy[:, 0] > 8.2) & (cut.xy[:, 0] < 11.8) & (cut.xy[:, 1] < 6.8)
-    assert not turn[band].any() and turn[~band & full.turnable(0.8)].any()
-    assert full.turnable(0.8)[band].any()
+    weighted = build_route_graph(grid, radius_m=0.7, spacing_m=1.0, seen=east_blind, unseen_cost=25.0)
+    assert full.arc_bias is None and weighted.arc_bias is not None
+    np.testing.assert_array_equal(weighted.edges, full.edges)  # nothing removed
+    arcs, bias = weighted.arcs, weighted.arc_bias
+    mid = 0.5 * (weighted.xy[arcs[:, 0]] + weighted.xy[arcs[:, 1]])
+    d = weighted.xy[arcs[:, 1]] - weighted.xy[arcs[:, 0]]
+    in_band = (mid[:, 0] > 8.6) & (mid[:, 0] < 11.4) & (mid[:, 1] < 6.4)
+    east, west = (
+        in_band & (d[:, 0] > 0.5) & (abs(d[:, 1]) < 1e-9),
+        in_band & (d[:, 0] < -0.5) & (abs(d[:, 1]) < 1e-9),
+    )
+    assert east.any() and np.allclose(bias[east], 26.0) and np.allclose(bias[west], 1.0)
+    assert np.allclose(bias[~in_band & (mid[:, 1] > 7.6)], 1.0)
+    # the guide from the west end to the east end goes round the band (y > 7)
+    start = weighted.nearest((2.0, 3.0), within_m=1.0)
+    goal = weighted.nearest((18.0, 3.0), within_m=1.0)
+    assert start is not None and goal is not None
+    to = weighted.turns(0.8, math.radians(50)).to_goal(goal, forward=False)
+    plain = full.turns(0.8, math.radians(50)).to_goal(goal, forward=False)
+    assert to.node[start] > plain.node[start] + 1.0  # round the band (through it: 4 m at 26x)
+    assert to.node[start] < plain.node[start] + 25.0
+    back = weighted.turns(0.8, math.radians(50)).to_goal(start, forward=False)
+    plain_back = full.turns(0.8, math.radians(50)).to_goal(start, forward=False)
+    assert back.node[goal] == pytest.approx(plain_back.node[goal])  # westbound: seen, straight through
 
 
 def _reference_in_view(cameras, marker_xyz, poses, size_m) -> np.ndarray:  # type: ignore[no-untyped-def]

@@ -331,7 +331,7 @@ class NavigationConfig:
     max_yaw_rate_rps: float = 0.8
     coordination: bool = True
     safety_distance_m: float = 0.6  # robots keep at least this between footprints
-    unseen_cost: float = 25.0  # camera steering: extra plan cost per metre where no camera sees the robot (0: off)
+    unseen_cost: float = 25.0  # camera steering: plan cost per metre no camera sees the robot (0: off)
 
     def __post_init__(self) -> None:
         if _incomplete(self):

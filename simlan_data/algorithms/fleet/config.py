@@ -36,6 +36,7 @@ class FleetConfig:
     stall_s: float = 3.0  # allowed to move but not moving for this long: stopped (an obstacle, replan)
     deadlock_after_s: float = 10.0  # deadlock bound: a robot waiting this long on a robot that does not move
     replan_s: float = 5.0  # least time between replans for a spent window, a queue, a stop, a failure
+    unseen_cost: float = 25.0  # camera steering: route guide's extra length per metre no camera sees (0: off)
 
     def __post_init__(self) -> None:
         _within("spacing_m", self.spacing_m, 0.2, 5.0, "m", 1.0)
@@ -49,6 +50,7 @@ class FleetConfig:
         _within("stall_s", self.stall_s, 0.0, 600.0, "s", 3.0)
         _within("deadlock_after_s", self.deadlock_after_s, 0.0, 600.0, "s", 10.0)
         _within("replan_s", self.replan_s, 0.0, 600.0, "s", 5.0)
+        _within("unseen_cost", self.unseen_cost, 0.0, 1000.0, "", 25.0, zero_ok=True)
 
     @property
     def step_s(self) -> float:

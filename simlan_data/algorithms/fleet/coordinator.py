@@ -131,6 +131,7 @@ class FleetCoordinator:
                 spacing_m=self.config.spacing_m,
                 reach_m=reach,
                 seen=self.seen,
+                unseen_cost=self.config.unseen_cost,
             )
         return self.graph
 

@@ -8,10 +8,14 @@ between them keeps the robot's radius from every obstacle. The result is a sampl
 narrow passages plus a lattice of lanes over open floor.
 
 Each node keeps its clearance: a robot may turn in place only at a node whose clearance covers its
-swept circle (``RouteGraph.turnable``). Given the floor the cameras see (``coverage.SeenFloor``,
-per heading: robots that steer on the cameras), an edge is kept only where a robot driving it
-either way stays seen, and a robot turns in place only at a node seen at every heading. Node kinds follow from the graph: ``end`` (one edge),
+swept circle (``RouteGraph.turnable``). Node kinds follow from the graph: ``end`` (one edge),
 ``lane`` (two), ``junction`` (three or more: an intersection or a passing place).
+
+Given the floor the cameras see (``coverage.SeenFloor`` per heading: robots that steer on the
+cameras), each arc (an edge driven one way) gets a guide weight: 1 + ``unseen_cost`` times the
+share of it driven where no camera sees the robot that way (``RouteGraph.arc_bias``). The route
+guide (``turns.py``) then keeps robots on seen floor where a seen way exists, and still finds a
+way where none does (a start, a goal or a passing place off the seen floor).
 """
 
 from __future__ import annotations
@@ -39,7 +43,8 @@ class RouteGraph:
     clearance_m: NDArray[np.float64]  # (N,) distance from each node to the nearest obstacle
     edges: NDArray[np.int64]  # (E, 2) node pairs, u < v
     radius_m: float  # the robot radius the graph was built for
-    seen_node: NDArray[np.bool_] | None = None  # (N,) seen at every heading (None: every node)
+    # (2E,) per arc of ``arcs``: how much longer the route guide counts it (None: 1 everywhere)
+    arc_bias: NDArray[np.float64] | None = None
 
     @property
     def size(self) -> int:
@@ -110,8 +115,7 @@ class RouteGraph:
     def turnable(self, reach_m: float) -> NDArray[np.bool_]:
         """Nodes where a robot whose footprint reaches ``reach_m`` from its centre turns in place
         without sweeping into an obstacle."""
-        ok = self.clearance_m >= reach_m
-        return ok if self.seen_node is None else ok & self.seen_node
+        return self.clearance_m >= reach_m
 
     @cached_property
     def _turn_graphs(self) -> dict[tuple[float, float], TurnGraph]:
@@ -123,9 +127,10 @@ class RouteGraph:
         if key not in self._turn_graphs:
             arcs = self.arcs
             d = self.xy[arcs[:, 1]] - self.xy[arcs[:, 0]]
+            lengths = np.hypot(d[:, 0], d[:, 1])
             self._turn_graphs[key] = TurnGraph(
                 arcs,
-                np.hypot(d[:, 0], d[:, 1]),
+                lengths if self.arc_bias is None else lengths * self.arc_bias,
                 np.arctan2(d[:, 1], d[:, 0]),
                 self.turnable(reach_m),
                 tolerance_rad,
@@ -168,10 +173,12 @@ def build_route_graph(
     spacing_m: float,
     reach_m: float | None = None,
     seen: NDArray[np.bool_] | None = None,
+    unseen_cost: float = 0.0,
 ) -> RouteGraph:
     """The route graph of ``grid`` for robots of radius ``radius_m`` (centre at least that far from
     obstacles); ``reach_m`` caps the clearance a node seeks (default: radius + half a block);
-    ``seen`` (HEADINGS, rows, cols): the floor the cameras see per heading (None: all of it)."""
+    ``seen`` (HEADINGS, rows, cols): the floor the cameras see per heading (None: all of it), an
+    arc's unseen share weighted by ``unseen_cost`` in the route guide."""
     clearance = grid.clearance_m().astype(np.float64)
     res = grid.resolution_m
     b = max(1, round(spacing_m / res))
@@ -194,20 +201,48 @@ def build_route_graph(
     xy = grid.to_xy(np.stack([cell_r, cell_c], axis=1))
     index = -np.ones((br, bc), dtype=np.int64)
     index[block_r, block_c] = np.arange(len(block_r))
-    edges = _free_edges(index, xy, clearance >= radius_m, grid, seen)
-    seen_node = None if seen is None else np.asarray(seen[:, cell_r, cell_c].all(axis=0))
-    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, seen_node)
+    edges = _free_edges(index, xy, clearance >= radius_m, grid)
+    bias = None
+    if seen is not None and unseen_cost > 0 and len(edges):
+        bias = 1.0 + unseen_cost * _unseen_share(grid, xy, edges, seen)
+    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias)
+
+
+def _unseen_share(
+    grid: OccupancyGrid, xy: NDArray[np.float64], edges: NDArray[np.int64], seen: NDArray[np.bool_]
+) -> NDArray[np.float64]:
+    """Per arc (every edge, then every edge reversed: ``RouteGraph.arcs``): the share of its samples
+    (every half cell) where no camera sees a robot driving it that way."""
+    p, q = xy[edges[:, 0]], xy[edges[:, 1]]
+    rows, cols = _samples(grid, p, q)
+    bins = seen.shape[0]
+    d = q - p
+    k = np.round(np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi / bins)).astype(np.int64) % bins
+    inside = (rows >= 0) & (cols >= 0) & (rows < grid.shape[0]) & (cols < grid.shape[1])
+    r, c = rows.clip(0, grid.shape[0] - 1), cols.clip(0, grid.shape[1] - 1)
+    out = []
+    for way in (k, (k + bins // 2) % bins):
+        unseen = ~seen[way[:, None], r, c] | ~inside
+        out.append(unseen.mean(axis=1))
+    return np.concatenate(out)
+
+
+def _samples(
+    grid: OccupancyGrid, p: NDArray[np.float64], q: NDArray[np.float64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Grid rows and columns of points every half cell along each segment p -> q (same count each)."""
+    n = max(2, int(np.ceil(np.linalg.norm(q - p, axis=1).max() / (0.5 * grid.resolution_m))) + 1)
+    t = np.linspace(0.0, 1.0, n)[None, :, None]
+    pts = p[:, None, :] + t * (q - p)[:, None, :]
+    rows = np.floor((pts[..., 1] - grid.origin_xy_m[1]) / grid.resolution_m).astype(np.int64)
+    cols = np.floor((pts[..., 0] - grid.origin_xy_m[0]) / grid.resolution_m).astype(np.int64)
+    return rows, cols
 
 
 def _free_edges(
-    index: NDArray[np.int64],
-    xy: NDArray[np.float64],
-    free: NDArray[np.bool_],
-    grid: OccupancyGrid,
-    seen: NDArray[np.bool_] | None = None,
+    index: NDArray[np.int64], xy: NDArray[np.float64], free: NDArray[np.bool_], grid: OccupancyGrid
 ) -> NDArray[np.int64]:
-    """Pairs of nodes in neighbouring blocks whose straight segment stays on free cells (and on
-    cells ``seen`` facing along it both ways)."""
+    """Pairs of nodes in neighbouring blocks whose straight segment stays on free cells."""
     pairs = []
     br, bc = index.shape
     for dr, dc in _NEIGHBOURS:
@@ -219,21 +254,9 @@ def _free_edges(
     cand = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
     if not len(cand):
         return cand
-    p, q = xy[cand[:, 0]], xy[cand[:, 1]]
-    n = max(2, int(np.ceil(np.linalg.norm(q - p, axis=1).max() / (0.5 * grid.resolution_m))) + 1)
-    t = np.linspace(0.0, 1.0, n)[None, :, None]
-    pts = p[:, None, :] + t * (q - p)[:, None, :]
-    rows = np.floor((pts[..., 1] - grid.origin_xy_m[1]) / grid.resolution_m).astype(np.int64)
-    cols = np.floor((pts[..., 0] - grid.origin_xy_m[0]) / grid.resolution_m).astype(np.int64)
+    rows, cols = _samples(grid, xy[cand[:, 0]], xy[cand[:, 1]])
     inside = (rows >= 0) & (cols >= 0) & (rows < free.shape[0]) & (cols < free.shape[1])
     ok = inside.all(axis=1)
     ok[ok] = free[rows[ok].clip(0), cols[ok].clip(0)].all(axis=1)
-    if seen is not None:
-        bins = seen.shape[0]
-        d = q - p
-        k = np.round(np.arctan2(d[:, 1], d[:, 0]) / (2 * np.pi / bins)).astype(np.int64) % bins
-        for way in (k, (k + bins // 2) % bins):
-            idx = np.flatnonzero(ok)
-            ok[idx] = seen[way[idx, None], rows[idx].clip(0), cols[idx].clip(0)].all(axis=1)
     out = np.sort(cand[ok], axis=1)
     return out[np.lexsort((out[:, 1], out[:, 0]))]

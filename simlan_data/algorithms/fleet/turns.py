@@ -87,8 +87,10 @@ class TurnGraph:
 
     def _plain(self, goal: int, cost: NDArray[np.float64]) -> ToGoal:
         """Route lengths that ignore heading: any turn anywhere (the arc's end node's length)."""
-        graph = csr_matrix((cost, (self.arcs[:, 0], self.arcs[:, 1])), shape=(self.size, self.size))
-        node_m = np.asarray(dijkstra(graph, directed=True, indices=goal))  # (symmetric: to = from)
+        # the arcs reversed: lengths from the goal there are lengths to it (an arc may cost more one
+        # way: the part of it no camera sees driven that way, RouteGraph.arc_bias)
+        graph = csr_matrix((cost, (self.arcs[:, 1], self.arcs[:, 0])), shape=(self.size, self.size))
+        node_m = np.asarray(dijkstra(graph, directed=True, indices=goal))
         arc_m = node_m[self.arcs[:, 1]]
         return ToGoal(self, goal, arc_m, node_m, cost + arc_m, plain=True)
 
