@@ -20,6 +20,8 @@ from simlan_data.algorithms.fleet.graph import build_route_graph
 from simlan_data.algorithms.markers import MIN_SIDE_PX, marker_corners_in_marker_frame, markers_in_view
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.planner import GridPlanner
+from simlan_data.config.validation import compose_config
+from simlan_data.errors import ConfigError
 from simlan_data.geometry.calibration import load_calibration
 from simlan_data.world.agent_types import AGENT_TYPES, MARKER_SIZE_M
 from simlan_data.world.layout import load_layout
@@ -112,6 +114,10 @@ def test_the_route_guide_counts_floor_no_camera_sees_as_longer() -> None:
     assert to.node[start] > plain.node[start] + 1.0  # round the band (through it: 4 m at 26x)
     assert to.node[start] < plain.node[start] + 25.0
     back = weighted.turns(0.8, math.radians(50)).to_goal(start, forward=False)
+    # a robot turns in place only where every heading is seen (not in the band)
+    band_nodes = (weighted.xy[:, 0] > 8.2) & (weighted.xy[:, 0] < 11.8) & (weighted.xy[:, 1] < 6.8)
+    assert full.turnable(0.8)[band_nodes].any() and not weighted.turnable(0.8)[band_nodes].any()
+    assert weighted.turnable(0.8)[~band_nodes & full.turnable(0.8)].all()
     plain_back = full.turns(0.8, math.radians(50)).to_goal(start, forward=False)
     assert back.node[goal] == pytest.approx(plain_back.node[goal])  # westbound: seen, straight through
 
@@ -182,3 +188,23 @@ def test_the_seen_floor_of_the_real_cameras_matches_the_marker_test() -> None:
         np.testing.assert_array_equal(floor.by_heading[k][cells[:, 0], cells[:, 1]], want)
     every, some = floor.every_heading.sum(), floor.by_heading.any(axis=0).sum()
     assert 0 < every < some
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        (
+            "navigation.unseen_cost=-1",
+            "invalid navigation.unseen_cost=-1.0 in config: must be a finite number >= 0",
+        ),
+        (
+            "algorithms.coordinator.unseen_cost=-3",
+            "invalid algorithms.coordinator.unseen_cost=-3.0 in config: must be within 0.0..1000.0;",
+        ),
+    ],
+)
+def test_a_bad_unseen_cost_is_refused_naming_the_key(override: str, message: str) -> None:
+    extra = ["algorithms/coordinator=fleet"] if override.startswith("algorithms") else []
+    with pytest.raises(ConfigError) as err:
+        compose_config([*extra, override])
+    assert message in str(err.value)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from simlan_data.algorithms.coordinator import Intent
 from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator, build_route_graph
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.roles import CoordinatorContext
@@ -56,6 +57,35 @@ def test_head_on_in_a_single_lane_aisle_one_yields_at_a_passing_place() -> None:
     # the one that waited its turn (about 35 s) was not taken for stopped the moment it could go
     assert max(fleet.coordinator.waits.values()) * 0.1 > FleetConfig().stall_s
     assert fleet.coordinator.state.stops == 0
+
+
+def test_a_robot_the_plan_holds_may_not_turn_in_place() -> None:
+    """Every decision that holds a robot (speed 0: it waits its turn, stands failed or parked)
+    forbids turning in place: the plan reserves a turn's swept circle only where it plans one."""
+    grid = grid_from_boxes((24, 8), [(5, 0, 19, 3), (5, 5.2, 19, 8)])
+    fleet = Fleet(grid, {"a": ((2, 4, 0.0), [(22.5, 4)], TRUCK), "b": ((22, 4, np.pi), [(1.5, 4)], TRUCK)})
+    held = []
+    for _ in range(60):
+        fleet.run(0.5)
+        decisions = fleet.coordinator.decide(round(fleet.t_s * 1e9), fleet.intents())
+        held += [d for d in decisions.values() if d.speed_limit_mps == 0.0]
+        assert all(d.turn_in_place for d in decisions.values() if d.speed_limit_mps != 0.0)
+    assert held and not any(d.turn_in_place for d in held)
+
+
+def test_a_robot_released_after_a_stall_does_not_drive_at_another() -> None:
+    """A robot counted stopped drives on its own navigator's path, but the coordinator holds it
+    where driving brake_m on would bring its footprint within the safety distance of another's (the
+    safety layer's TTC rule does not act once two robots' circumscribed circles overlap)."""
+    grid = grid_from_boxes((24, 8), [])
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(SAFETY_M, grid))
+    truck = Intent("a", 0, (10.0, 4.0, 0.0), TRUCK, goal_xy=(20.0, 4.0))
+    ahead = Intent("b", 1, (12.6, 4.0, np.pi), TRUCK, goal_xy=(2.0, 4.0))  # 1.2 m nose to nose
+    behind = Intent("b", 1, (7.4, 4.0, np.pi), TRUCK, goal_xy=(2.0, 4.0))  # behind it, 2.15 m off its tail
+    assert coordinator._closing_in(truck, [truck, ahead])
+    assert not coordinator._closing_in(truck, [truck, behind])
+    far = Intent("b", 1, (16.0, 4.0, np.pi), TRUCK, goal_xy=(2.0, 4.0))
+    assert not coordinator._closing_in(truck, [truck, far])
 
 
 def test_two_pallet_trucks_pass_side_by_side_in_a_wide_aisle() -> None:

@@ -185,3 +185,21 @@ def test_a_navigator_with_every_goal_done_drives_only_the_way_aside_it_is_given(
     assert np.hypot(x - 3.5, y - 1.5) < 0.3
     assert nav.status.state == "done" and nav.status.goals_reached == 0  # no goal counted
     assert nav.step((x, y, yaw), dt, Decision(0.0)) == (0.0, 0.0)
+
+
+def test_a_robot_held_without_turning_stands_still_while_a_waiting_one_may_face_its_path() -> None:
+    """Held at speed 0, a navigator whose path lies behind it turns in place towards it (the `gpss`
+    coordinator's waiting robots do), unless the decision forbids it (``turn_in_place=False``: a
+    fleet plan reserves a turn's swept circle only where it plans the turn; a forklift held so
+    turned anyway and swept its forks to 0.10 m of a pallet truck)."""
+    grid = _room_with_wall()
+    nav = Navigator(
+        "robot_agent_1", [[1.0, 1.5]], GridPlanner(grid, radius_m=0.4), PursuitParams(max_speed_mps=1.0)
+    )
+    pose = (3.0, 1.5, 0.0)  # facing away from its goal
+    v, w = nav.step(pose, 0.05, Decision(0.0))
+    assert v == 0.0 and abs(w) > 0.1  # waits, turning towards its path
+    assert nav.step(pose, 0.05, Decision(0.0, turn_in_place=False)) == (0.0, 0.0)
+    assert nav.status.state == "waiting"
+    v, w = nav.step(pose, 0.05, Decision(None, turn_in_place=False))
+    assert v == 0.0 and abs(w) > 0.1  # free: the turn is its plan's first move

@@ -237,7 +237,7 @@ class Navigator:
                 return 0.0, 0.0
         limit = None if decision is None else decision.speed_limit_mps
         assert self.follower is not None
-        v, w = self.follower.step(x, y, yaw, dt_s, speed_limit_mps=limit)
+        v, w = _held(decision, *self.follower.step(x, y, yaw, dt_s, speed_limit_mps=limit))
         self.status.state = "waiting" if limit == 0.0 else "following"
         if self.follower.done:
             self.status.goals_reached += 1
@@ -254,4 +254,13 @@ class Navigator:
             return 0.0, 0.0
         limit = None if decision is None else decision.speed_limit_mps
         x, y, yaw = pose_xyyaw
-        return self.aside.step(x, y, yaw, dt_s, speed_limit_mps=limit)
+        return _held(decision, *self.aside.step(x, y, yaw, dt_s, speed_limit_mps=limit))
+
+
+def _held(decision: Decision | None, v: float, w: float) -> tuple[float, float]:
+    """The follower's twist, without a turn in place where the decision holds the robot at speed 0
+    and forbids it (``Decision.turn_in_place``): a forklift held by a fleet plan turned towards its
+    path and swept its forks into a pallet truck (docs/fleet.md)."""
+    if decision is not None and decision.speed_limit_mps == 0.0 and not decision.turn_in_place and v == 0.0:
+        return 0.0, 0.0
+    return v, w

@@ -15,7 +15,7 @@ def _within(
     """Refuse ``value`` outside (low, high] ([low, high] with ``zero_ok``), naming the key."""
     if not (low <= value <= high if zero_ok else low < value <= high):
         raise ConfigError.invalid(
-            _KEY + name, value, f"must be within {low}..{high} {unit}", f"use {default}"
+            _KEY + name, value, f"must be within {low}..{high} {unit}".rstrip(), f"use {default}"
         )
 
 

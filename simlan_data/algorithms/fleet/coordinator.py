@@ -20,7 +20,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from simlan_data.algorithms.coordinator import Decision, Intent
+from simlan_data.algorithms.coordinator import Decision, Intent, footprint_polygon
 from simlan_data.algorithms.fleet.config import FleetConfig
 from simlan_data.algorithms.fleet.execution import Route, advance, build_routes, frontier, wait_cycles
 from simlan_data.algorithms.fleet.footprint import Shape
@@ -105,7 +105,7 @@ class FleetCoordinator:
         if self._must_replan(t_ns, movers):
             names = {i.namespace for i in movers}
             self._replan(t_ns, graph, movers, [i for i in intents if i.namespace not in names])
-        return self._decisions(t_ns, graph, movers)
+        return self._decisions(t_ns, graph, movers, intents)
 
     def _idle(self, t_ns: int, intent: Intent) -> Intent:
         """An idle robot as a mover of the lowest priority whose goal is its parking place (where it
@@ -280,20 +280,25 @@ class FleetCoordinator:
         keep = [pts[0]] + [p for a, p in itertools.pairwise(pts) if np.linalg.norm(p - a) > 1e-6]
         return np.asarray(keep if len(keep) >= 2 else [pts[0], pts[0]])
 
-    def _decisions(self, t_ns: int, graph: RouteGraph, movers: list[Intent]) -> dict[str, Decision]:
+    def _decisions(
+        self, t_ns: int, graph: RouteGraph, movers: list[Intent], intents: list[Intent]
+    ) -> dict[str, Decision]:
         out: dict[str, Decision] = {}
         waits: dict[str, list[str]] = {}
         for i in movers:
             ns, r = i.namespace, self._robots[i.namespace]
             route = self.state.routes.get(ns)
             if r.stopped_since_ns is not None:
-                out[ns] = Decision(None)  # stopped: an obstacle for the plan until it moves on its own
+                # stopped: an obstacle for the plan until it moves on its own (not towards another)
+                out[ns] = (
+                    Decision(0.0, turn_in_place=False) if self._closing_in(i, intents) else Decision(None)
+                )
                 continue
             if route is None or r.path_xy is None or ns in self.state.plan.failures:
-                out[ns] = Decision(0.0)  # off the graph or failed: stands for the others
+                out[ns] = Decision(0.0, turn_in_place=False)  # off the graph or failed: stands for the others
                 continue
             if i.priority >= IDLE_PRIORITY and len(route.nodes) == 1 and self._at(i, r.park):
-                out[ns] = Decision(0.0)  # idle where it parks: it stands
+                out[ns] = Decision(0.0, turn_in_place=False)  # idle where it parks: it stands
                 continue
             last, holders = frontier(self.state.routes, ns)
             plan = self.state.plan.plans[ns]
@@ -306,9 +311,31 @@ class FleetCoordinator:
                 r.waiting_since_ns = r.waiting_since_ns if r.waiting_since_ns is not None else t_ns
             else:
                 r.waiting_since_ns = None
-            out[ns] = Decision(limit, tuple(holders) if limit == 0.0 else (), path_xy=r.path_xy)
+            # held at its frontier it stands still: a turn's circle is reserved only where planned
+            out[ns] = Decision(
+                limit, tuple(holders) if limit == 0.0 else (), path_xy=r.path_xy, turn_in_place=limit != 0.0
+            )
         self._check_deadlock(t_ns, waits, movers)
         return out
+
+    def _closing_in(self, intent: Intent, intents: list[Intent]) -> bool:
+        """Whether a robot released to its own navigator (counted stopped) would, driving ``brake_m``
+        straight on, bring its footprint nearer another agent's than the safety distance. The plan
+        no longer keeps it apart, and the safety layer's TTC rule (on circumscribed circles) skips
+        an approach once two circles overlap: a released pallet truck closed to 0.10 m on a
+        forklift turning in place (docs/fleet.md, the open safety finding)."""
+        x, y, yaw = intent.pose_xyyaw
+        ahead = (x + self.config.brake_m * np.cos(yaw), y + self.config.brake_m * np.sin(yaw), yaw)
+        here = footprint_polygon(intent.pose_xyyaw, intent.footprint_m)
+        sweep = here.union(footprint_polygon(ahead, intent.footprint_m))
+        for other in intents:
+            if other.namespace == intent.namespace:
+                continue
+            theirs = footprint_polygon(other.pose_xyyaw, other.footprint_m)
+            near = sweep.distance(theirs)
+            if near < self.safety_m and near < here.distance(theirs) - 1e-3:
+                return True
+        return False
 
     def _at(self, intent: Intent, xy: tuple[float, float] | None) -> bool:
         return xy is not None and bool(

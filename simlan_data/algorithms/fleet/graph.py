@@ -15,7 +15,8 @@ Given the floor the cameras see (``coverage.SeenFloor`` per heading: robots that
 cameras), each arc (an edge driven one way) gets a guide weight: 1 + ``unseen_cost`` times the
 share of it driven where no camera sees the robot that way (``RouteGraph.arc_bias``). The route
 guide (``turns.py``) then keeps robots on seen floor where a seen way exists, and still finds a
-way where none does (a start, a goal or a passing place off the seen floor).
+way where none does (a start, a goal or a passing place off the seen floor). A robot turns in
+place only at a node seen at every heading (a turn elsewhere can lose the cameras half way).
 """
 
 from __future__ import annotations
@@ -45,6 +46,8 @@ class RouteGraph:
     radius_m: float  # the robot radius the graph was built for
     # (2E,) per arc of ``arcs``: how much longer the route guide counts it (None: 1 everywhere)
     arc_bias: NDArray[np.float64] | None = None
+    # (N,) where a robot may turn in place as far as the cameras go: seen at every heading (None: all)
+    seen_node: NDArray[np.bool_] | None = None
 
     @property
     def size(self) -> int:
@@ -115,7 +118,8 @@ class RouteGraph:
     def turnable(self, reach_m: float) -> NDArray[np.bool_]:
         """Nodes where a robot whose footprint reaches ``reach_m`` from its centre turns in place
         without sweeping into an obstacle."""
-        return self.clearance_m >= reach_m
+        ok = self.clearance_m >= reach_m
+        return ok if self.seen_node is None else ok & self.seen_node
 
     @cached_property
     def _turn_graphs(self) -> dict[tuple[float, float], TurnGraph]:
@@ -202,10 +206,11 @@ def build_route_graph(
     index = -np.ones((br, bc), dtype=np.int64)
     index[block_r, block_c] = np.arange(len(block_r))
     edges = _free_edges(index, xy, clearance >= radius_m, grid)
-    bias = None
+    bias, seen_node = None, None
     if seen is not None and unseen_cost > 0 and len(edges):
         bias = 1.0 + unseen_cost * _unseen_share(grid, xy, edges, seen)
-    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias)
+        seen_node = np.asarray(seen[:, cell_r, cell_c].all(axis=0))
+    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node)
 
 
 def _unseen_share(
