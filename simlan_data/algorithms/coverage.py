@@ -47,6 +47,16 @@ class SeenFloor:
         return SeenFloor(self.by_heading & other.by_heading)
 
 
+def seen_by_all(floors: Iterable[SeenFloor]) -> SeenFloor:
+    """The floor seen for every one of ``floors`` (a robot of each marker mount); at least one."""
+    out: SeenFloor | None = None
+    for f in floors:
+        out = f if out is None else out & f
+    if out is None:
+        raise ValueError("seen_by_all needs at least one floor")
+    return out
+
+
 def heading_index(yaw_rad: float) -> int:
     """The heading bin ``k`` of ``yaw_rad`` (nearest multiple of 45 degrees)."""
     return round(yaw_rad / (2.0 * math.pi / HEADINGS)) % HEADINGS

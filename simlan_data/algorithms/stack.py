@@ -28,7 +28,7 @@ from shapely.ops import unary_union
 
 from simlan_data.algorithms.aruco_localizer import ArucoLocalizer
 from simlan_data.algorithms.coordinator import Decision, Intent, footprint_polygon, swept_claim
-from simlan_data.algorithms.coverage import SeenFloor, seen_floor
+from simlan_data.algorithms.coverage import SeenFloor, seen_by_all, seen_floor
 from simlan_data.algorithms.follower import FollowerParams, PursuitParams, WaypointFollower
 from simlan_data.algorithms.gpss_coordinator import GpssCoordinator, GpssCoordinatorConfig
 from simlan_data.algorithms.localization import ImageSearch, LocalizerParams, PoseEstimate
@@ -122,15 +122,6 @@ def _marker_mounts(agents: list[AgentPlan]) -> list[MarkerMount]:
     ]
 
 
-def _every(floors: Iterable[SeenFloor]) -> SeenFloor:
-    """The floor seen for every one of ``floors`` (a robot of each mount)."""
-    out: SeenFloor | None = None
-    for f in floors:
-        out = f if out is None else out & f
-    assert out is not None
-    return out
-
-
 def robot_footprints(agents: Iterable[AgentPlan]) -> dict[str, Footprint]:
     """Every robot's and static agent's footprint: what the RGB person detector removes."""
     return {a.namespace: a.kind.footprint_m for a in agents if a.kind.drive in ("diff", "static")}
@@ -182,7 +173,7 @@ class GpssStack:
             CoordinatorContext(
                 safety_distance_m=nav.safety_distance_m,
                 grid=grid,
-                seen=None if not self.seen else _every(self.seen.values()).by_heading,
+                seen=None if not self.seen else seen_by_all(self.seen.values()).by_heading,
             )
         )
         self._granted: set[str] = set()  # robots the coordinator let drive at the last decision
