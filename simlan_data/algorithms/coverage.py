@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from simlan_data.algorithms.markers import markers_in_view
 from simlan_data.algorithms.occupancy import OccupancyGrid
 from simlan_data.geometry.camera import CameraModel
+from simlan_data.world.agent_types import MARKER_SIZE_M, AgentType
 
 HEADINGS = 8  # every 45 degrees: the grid planner's move directions
 STEP_CELLS = 2  # tested on every 2nd cell (0.2 m at the default resolution), spread to its block
@@ -39,12 +40,29 @@ class SeenFloor:
         """Cells seen at every heading (a robot may turn in place there and stay seen)."""
         return np.asarray(self.by_heading.all(axis=0))
 
-    def share(self) -> NDArray[np.float64]:
-        """Per cell: the share of headings at which it is seen."""
-        return np.asarray(self.by_heading.mean(axis=0))
-
     def __and__(self, other: SeenFloor) -> SeenFloor:
         return SeenFloor(self.by_heading & other.by_heading)
+
+
+def robot_floors(
+    grid: OccupancyGrid,
+    cameras: Iterable[CameraModel],
+    kinds: Iterable[AgentType],
+    *,
+    clearance_m: float,
+) -> dict[tuple[float, float, float], SeenFloor]:
+    """Per marker mount of the driving ``kinds``: the floor the cameras see it on, tested where the
+    narrowest of them can drive (its half width + ``clearance_m`` from obstacles; the planners'
+    radius). Empty when none of them carries a marker."""
+    robots = [k for k in kinds if k.drive == "diff" and k.marker_xyz is not None]
+    if not robots:
+        return {}
+    free = grid.clearance_m() >= min(k.half_width_m for k in robots) + clearance_m
+    cams = tuple(cameras)
+    return {
+        m: seen_floor(grid, cams, m, marker_size_m=MARKER_SIZE_M, free=free)
+        for m in sorted({k.marker_xyz for k in robots if k.marker_xyz is not None})
+    }
 
 
 def seen_by_all(floors: Iterable[SeenFloor]) -> SeenFloor:

@@ -17,11 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from simlan_data.algorithms.coverage import HEADINGS, heading_index
 from simlan_data.algorithms.occupancy import OccupancyGrid
 
 _SQRT2 = float(np.sqrt(2.0))
-# the heading bin (coverage.HEADINGS, 45 degrees each) of a move (d_row, d_col): rows grow with y
-_HEADING = {(dr, dc): round(math.atan2(dr, dc) / (math.pi / 4)) % 8 for dr in (-1, 0, 1) for dc in (-1, 0, 1)}
+# the heading bin of a move (d_row, d_col): rows grow with y
+_HEADING = {(dr, dc): heading_index(math.atan2(dr, dc)) for dr in (-1, 0, 1) for dc in (-1, 0, 1)}
 _MOVES = [
     (-1, 0, 1.0),
     (1, 0, 1.0),
@@ -65,12 +66,12 @@ class GridPlanner:
         # extra cost per metre walked near obstacles (0 beyond radius + comfort)
         self.penalty = np.clip((radius_m + comfort_m - clearance) / comfort_m, 0.0, 1.0) * comfort_weight
         self.clearance = clearance
-        # (8, rows, cols) SeenFloor.by_heading, or None: every cell counts as seen
+        # (HEADINGS, rows, cols) SeenFloor.by_heading, or None: every cell counts as seen
         self.unseen = None if seen is None or unseen_cost <= 0 else ~np.asarray(seen, dtype=bool)
         # per heading bin: the cost per metre of entering a cell (1 + comfort penalty + unseen)
         base = 1.0 + self.penalty
         self._cost = (
-            [base] * 8
+            [base] * HEADINGS
             if self.unseen is None
             else [base + (unseen_cost * u).astype(base.dtype) for u in self.unseen]
         )
@@ -177,7 +178,7 @@ class GridPlanner:
         n = max(2, int(np.ceil(np.linalg.norm(b - a) / (0.5 * self.grid.resolution_m))))
         unseen = None
         if self.unseen is not None and not unseen_ok:
-            unseen = self.unseen[round(math.atan2(b[1] - a[1], b[0] - a[0]) / (math.pi / 4)) % 8]
+            unseen = self.unseen[heading_index(math.atan2(b[1] - a[1], b[0] - a[0]))]
         for t in np.linspace(0.0, 1.0, n):
             cell = self.grid.to_cell(a + t * (b - a))
             if not self.grid.inside(cell) or not free[cell] or self.penalty[cell] > max_penalty:
@@ -195,7 +196,7 @@ class GridPlanner:
             d = points[k] - points[k - 1]
             cell = self.grid.to_cell(points[k])
             if self.grid.inside(cell):
-                out[k] = self.unseen[round(math.atan2(d[1], d[0]) / (math.pi / 4)) % 8][cell]
+                out[k] = self.unseen[heading_index(math.atan2(d[1], d[0]))][cell]
         return out
 
     def _smooth(self, points: NDArray[np.float64], free: NDArray[np.bool_]) -> NDArray[np.float64]:

@@ -28,7 +28,7 @@ from shapely.ops import unary_union
 
 from simlan_data.algorithms.aruco_localizer import ArucoLocalizer
 from simlan_data.algorithms.coordinator import Decision, Intent, footprint_polygon, swept_claim
-from simlan_data.algorithms.coverage import SeenFloor, seen_by_all, seen_floor
+from simlan_data.algorithms.coverage import SeenFloor, robot_floors, seen_by_all
 from simlan_data.algorithms.follower import FollowerParams, PursuitParams, WaypointFollower
 from simlan_data.algorithms.gpss_coordinator import GpssCoordinator, GpssCoordinatorConfig
 from simlan_data.algorithms.localization import ImageSearch, LocalizerParams, PoseEstimate
@@ -189,15 +189,8 @@ class GpssStack:
         robots steer on the cameras and ``unseen_cost`` > 0; else none (every floor counts)."""
         if self.source != "camera" or not self.cameras or self.nav.unseen_cost <= 0:
             return {}
-        robots = [a for a in agents if a.kind.drive == "diff" and a.kind.marker_xyz is not None]
-        if not robots:
-            return {}
-        smallest = min(a.kind.half_width_m for a in robots) + self.nav.clearance_m
-        free = self.grid.clearance_m() >= smallest
-        return {
-            m: seen_floor(self.grid, self.cameras.values(), m, marker_size_m=MARKER_SIZE_M, free=free)
-            for m in sorted({a.kind.marker_xyz for a in robots if a.kind.marker_xyz is not None})
-        }
+        kinds = [a.kind for a in agents]
+        return robot_floors(self.grid, self.cameras.values(), kinds, clearance_m=self.nav.clearance_m)
 
     def _build_navigators(self, agents: list[AgentPlan]) -> None:
         """Give every robot a navigator (planners shared per radius and marker mount) and every

@@ -38,7 +38,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from simlan_data.algorithms.coverage import SeenFloor, connected_seen, seen_floor
+from simlan_data.algorithms.coverage import connected_seen, seen_by_all, seen_floor
 from simlan_data.algorithms.markers import markers_in_view
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.planner import GridPlanner, PlanningError
@@ -242,6 +242,7 @@ def generate_missions(
         if cameras
         else _spots(grid, clearance, need, spec.area_m)
     )
+    rack_band = spots[spots[:, 2] <= spots[:, 2].min() + RACK_BAND_M] if len(spots) else spots
     # a draw that leaves no room (homes, docks, a pickup) is drawn again from the same seed:
     # every seed of a sweep gets missions where the floor holds them at all
     for attempt in range(DRAWS):
@@ -250,7 +251,7 @@ def generate_missions(
         taken: list[tuple[float, float, float]] = []
         stations = _pick_apart(rng, spots, [widest + SPACING_M] * shared, taken)
         homes = _pick_apart(rng, spots, [k.radius_m + SPACING_M / 2 for k in kinds], taken)
-        near_rack = spots[spots[:, 2] <= spots[:, 2].min() + RACK_BAND_M] if len(spots) else spots
+        near_rack = rack_band
         for x, y, r in taken:  # a pickup keeps clear of homes (robots park there) and shared spots
             near_rack = near_rack[
                 np.hypot(near_rack[:, 0] - x, near_rack[:, 1] - y) >= r + widest + SPACING_M
@@ -327,12 +328,10 @@ def _seen_spots(
     planner radius), the part that holds most of them. A robot driving between two spots of
     different parts would lose the cameras on the way and stand for good."""
     drive = clearance >= drive_m
-    seen: SeenFloor | None = None
-    for marker in sorted({k.marker_xyz for k in kinds if k.marker_xyz is not None}):
-        one = seen_floor(grid, cameras, marker, marker_size_m=MARKER_SIZE_M, free=drive)
-        seen = one if seen is None else seen & one
-    if seen is None:  # no robot carries a marker: nothing to see
+    markers = sorted({k.marker_xyz for k in kinds if k.marker_xyz is not None})
+    if not markers:  # no robot carries a marker: nothing to see
         return _spots(grid, clearance, need_m, area)
+    seen = seen_by_all(seen_floor(grid, cameras, m, marker_size_m=MARKER_SIZE_M, free=drive) for m in markers)
     labels = connected_seen(seen, drive)
     cells = np.argwhere((clearance >= need_m) & (labels > 0))
     xy = grid.to_xy(cells) if len(cells) else np.zeros((0, 2))

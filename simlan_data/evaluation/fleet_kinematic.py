@@ -19,7 +19,7 @@ import polars as pl
 from numpy.typing import NDArray
 
 from simlan_data.algorithms.coordinator import Intent
-from simlan_data.algorithms.coverage import seen_floor
+from simlan_data.algorithms.coverage import robot_floors, seen_by_all
 from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator
 from simlan_data.algorithms.occupancy import grid_from_world
 from simlan_data.algorithms.roles import CoordinatorContext
@@ -28,7 +28,7 @@ from simlan_data.config.missions import MissionsConfig, generate_missions
 from simlan_data.constants import NS_PER_S
 from simlan_data.evaluation.fleet_metrics import Status, fleet_metrics
 from simlan_data.geometry.camera import CameraModel
-from simlan_data.world.agent_types import AGENT_TYPES, MARKER_SIZE_M, AgentType
+from simlan_data.world.agent_types import AGENT_TYPES, AgentType
 from simlan_data.world.layout import load_layout
 
 CLEARANCE_M = 0.4  # navigation.clearance_m's default (the smallest planner radius's margin)
@@ -190,11 +190,9 @@ def mission_fleet(
     grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=0.1)
     kinds = {n: AGENT_TYPES[a["type"]] for n, a in missions.agents.items()}
     seen = None
-    if cameras:
-        free = grid.clearance_m() >= min(k.half_width_m for k in kinds.values()) + CLEARANCE_M
-        markers = sorted({k.marker_xyz for k in kinds.values() if k.marker_xyz is not None})
-        floors = [seen_floor(grid, cameras, m, marker_size_m=MARKER_SIZE_M, free=free) for m in markers]
-        seen = np.logical_and.reduce([f.by_heading for f in floors])
+    floors = robot_floors(grid, cameras, kinds.values(), clearance_m=CLEARANCE_M) if cameras else {}
+    if floors:
+        seen = seen_by_all(floors.values()).by_heading
     coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(safety_m, grid, seen))
     spec = {
         n: (tuple(a["pose"]), [tuple(g) for g in a["goals"]], kinds[n].footprint_m, a["speed_mps"])
