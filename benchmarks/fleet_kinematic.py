@@ -3,6 +3,7 @@
     python benchmarks/fleet_kinematic.py [--robots 4,8,12] [--seeds 100] [--tasks 3]
                                          [--limit-s 900] [--jobs 2] [--json FILE]
                                          [--cameras gpss_all] [--types jackal]
+                                         [--set reverse_ratio=0.5 ...] [--baseline]
 
 For every fleet size and seed: the missions of ``scenario=fleet`` (simlan_data/config/missions.py,
 the same generator and seed as the run), the real layout's occupancy grid, and
@@ -14,12 +15,16 @@ simlan_data/evaluation/fleet_metrics.py on the trace), waits, failures,
 the smallest footprint-to-footprint gap, makespan, tasks per hour and the planning time (wall, and
 CPU time: on a shared machine the wall time is an upper bound, the CPU time compares runs). This
 measures the coordination itself; the closed loop in the simulator is the sweep in docs/fleet.md.
-Writes JSON with a ``figures`` list (one per fleet size) for benchmarks/summary.py.
+``--set KEY=VALUE`` sets a key of the coordinator's config (``algorithms.coordinator.KEY``, e.g.
+``reverse_ratio=0.5``, ``shelters=true``; the figure's id then names them); with ``--baseline``
+every case runs a second time with the defaults, in the same run, and the figure names that as its
+baseline. Writes JSON with a ``figures`` list (one per fleet size) for benchmarks/summary.py.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import sys
@@ -31,6 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine
+from simlan_data.algorithms.fleet import FleetConfig
 from simlan_data.config.validation import compose_config
 from simlan_data.evaluation.fleet_kinematic import mission_fleet
 from simlan_data.geometry.calibration import load_calibration
@@ -47,11 +53,20 @@ def cameras_of(name: str) -> list:
     return [load_calibration(i).camera.scaled(cfg.cameras.width, cfg.cameras.height) for i in cfg.cameras.ids]
 
 
-def one(robots: int, seed: int, tasks: int, limit_s: float, cameras: str = "", types: str = "") -> dict:
-    """One seeded mission set to the end (or ``limit_s``)."""
+def one(
+    robots: int,
+    seed: int,
+    tasks: int,
+    limit_s: float,
+    cameras: str = "",
+    types: str = "",
+    overrides: dict | None = None,
+) -> dict:
+    """One seeded mission set to the end (or ``limit_s``); ``overrides``: coordinator config keys."""
+    config = FleetConfig(**(overrides or {}))
     fleet, kinds = mission_fleet(
         robots, seed, tasks=tasks, dwell_s=DWELL_S, safety_m=SAFETY_M, cameras=cameras_of(cameras),
-        types=types.split(",") if types else None,
+        types=types.split(",") if types else None, config=config,
     )  # fmt: skip
     goals = fleet.goals_left()
     t0, c0 = time.perf_counter(), time.process_time()
@@ -70,6 +85,7 @@ def one(robots: int, seed: int, tasks: int, limit_s: float, cameras: str = "", t
         "failures": dict(state.failures), "min_gap_m": round(fleet.min_gap_m(every=5), 3),
         "makespan_s": round(fleet.t_s, 1), "tasks_per_hour": round(3600 * tasks_done / max(fleet.t_s, 1e-9), 1),
         "replans": state.replans, "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
+        "overrides": overrides or {},
     }  # fmt: skip
 
 
@@ -94,15 +110,31 @@ def summary(rows: list[dict]) -> dict[int, dict]:
     return out
 
 
-def figures(table: dict[int, dict], limit_s: float, cameras: str = "", types: str = "") -> list[dict]:
-    """One BENCHMARKS row per fleet size (benchmarks/summary.py)."""
+def figures(
+    table: dict[int, dict],
+    limit_s: float,
+    cameras: str = "",
+    types: str = "",
+    base: dict | None = None,
+    overrides: dict | None = None,
+) -> list[dict]:
+    """One BENCHMARKS row per fleet size (benchmarks/summary.py); ``base``: the same cases with the
+    coordinator's defaults, measured in the same run (``overrides``: what the measured run set)."""
     tag = (f"_{cameras}" if cameras else "") + (f"_{types.replace(',', '_')}" if types else "")
+    tag += "".join(f"_{k}" for k in sorted(overrides or {}))
     where = f", on the floor the {cameras} cameras see" if cameras else ""
     mix = f", {types} only" if types else ""
+    mix += "".join(f", {k}={v}" for k, v in sorted((overrides or {}).items()))
     return [
         {"id": f"fleet_kinematic{tag}_{n}", "figure": f"fleet coordinator alone, {n} robots{mix}, seeded missions (kinematic robots{where}): missions done",
          "value": row["missions_done"], "unit": f"of {row['runs']}", "target": "every task done, 0 deadlocks",
-         "baseline": "none in this benchmark: gpss and independent robots give no routes to drive; the closed loop compares them",
+         "baseline": (
+             f"the same cases, same run, the coordinator's defaults: {base[n]['missions_done']} of {base[n]['runs']}, "
+             f"goals {base[n]['goals_reached']}, {base[n]['runs_with_deadlock']} runs with a deadlock, "
+             f"smallest gap {base[n]['min_gap_m']} m"
+             if base and n in base else
+             "none in this benchmark: gpss and independent robots give no routes to drive; the closed loop compares them"
+         ),
          "note": f"goals {row['goals_reached']}, deadlocks {row['deadlocks']} (coordinator's count; the recording's "
                  f"definition: {row.get('fleet_deadlocks', '-')} in {row.get('runs_with_deadlock', '-')} runs), "
                  f"wait mean {row.get('wait_s_mean', '-')} s / max {row.get('wait_s_max', '-')} s, "
@@ -112,6 +144,19 @@ def figures(table: dict[int, dict], limit_s: float, cameras: str = "", types: st
                  f"not done: {row.get('not_done', [])}"}
         for n, row in table.items()
     ]  # fmt: skip
+
+
+def _overrides(items: list[str]) -> dict:
+    """``KEY=VALUE`` strings as coordinator config values (typed as FleetConfig's fields)."""
+    fields = {f.name: f.type for f in dataclasses.fields(FleetConfig)}
+    out: dict = {}
+    for item in items:
+        key, _, value = item.partition("=")
+        if key not in fields:
+            sys.exit(f"error: --set {item}: FleetConfig has no key '{key}' (known: {', '.join(fields)})")
+        kind = str(fields[key])
+        out[key] = value.lower() in ("1", "true", "yes") if kind == "bool" else float(value)
+    return out
 
 
 def main() -> None:
@@ -124,18 +169,29 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--cameras", default="", help="e.g. gpss_all: missions and routes on the floor they see")
     ap.add_argument("--types", default="", help="robot types of the mix, e.g. jackal (default: the fleet's)")
+    ap.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="a coordinator config key"
+    )
+    ap.add_argument(
+        "--baseline", action="store_true", help="also run every case with the coordinator's defaults"
+    )
     args = ap.parse_args()
+    overrides = _overrides(args.set)
     cases = [(int(n), s) for n in args.robots.split(",") for s in range(args.seeds)]
-    rows = []
+    variants = [overrides] + ([{}] if args.baseline else [])
+    rows, base_rows = [], []
     with ProcessPoolExecutor(args.jobs) as pool:
         futures = [
-            pool.submit(one, n, s, args.tasks, args.limit_s, args.cameras, args.types) for n, s in cases
+            (k, pool.submit(one, n, s, args.tasks, args.limit_s, args.cameras, args.types, v))
+            for n, s in cases
+            for k, v in enumerate(variants)
         ]
-        for f in futures:
+        for k, f in futures:
             r = f.result()
-            rows.append(r)
+            (rows if k == 0 else base_rows).append(r)
             print(json.dumps(r), flush=True)
     table = summary(rows)
+    base = summary(base_rows) if base_rows else None
     for n, row in table.items():
         print(n, row, flush=True)
     command = (
@@ -143,6 +199,8 @@ def main() -> None:
         f" --tasks {args.tasks} --limit-s {args.limit_s:g}"
         + (f" --cameras {args.cameras}" if args.cameras else "")
         + (f" --types {args.types}" if args.types else "")
+        + "".join(f" --set {kv}" for kv in args.set)
+        + (" --baseline" if base else "")
         + " --json FILE"
     )
     result = {
@@ -151,8 +209,10 @@ def main() -> None:
         "date": datetime.date.today().isoformat(),
         "history": "docs/benchmarks/fleet.md",
         "summary": table,
-        "figures": figures(table, args.limit_s, args.cameras, args.types),
+        "baseline_summary": base,
+        "figures": figures(table, args.limit_s, args.cameras, args.types, base, overrides),
         "rows": rows,
+        "baseline_rows": base_rows,
     }
     if args.json:
         args.json.write_text(json.dumps(result, indent=1) + "\n")

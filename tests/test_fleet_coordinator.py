@@ -142,8 +142,9 @@ def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
 
 def test_a_robot_facing_away_from_its_goal_in_a_lane_too_narrow_to_turn_drives_round() -> None:
     # a pallet truck in a 1.6 m lane (no room to turn: reach 1.37 m) faces east, its goal lies west
-    # beyond the plan's window: it must drive east to the open floor, turn there and come back.
-    # Plain route lengths said "west is near" and the windowed plan stood still for good.
+    # beyond the plan's window. A truck that never reverses (the default) must drive east to the open floor, turn
+    # there and come back (plain route lengths said "west is near" and the windowed plan stood still
+    # for good); one that reverses backs out west, facing east all the way
     grid = grid_from_boxes((32, 10), [(5, 0, 27, 4.2), (5, 5.8, 27, 10)])
     coordinator = FleetCoordinator(FleetConfig(horizon_s=20.0), CoordinatorContext(SAFETY_M, grid))
     fleet = KinematicFleet(coordinator, {"t": ((10, 5.0, 0.0), [(2, 5)], TRUCK)})
@@ -151,6 +152,53 @@ def test_a_robot_facing_away_from_its_goal_in_a_lane_too_narrow_to_turn_drives_r
     assert fleet.done("t")
     assert fleet.path("t")[:, 0].max() > 27  # round by the open floor in the east
     assert coordinator.state.failures == {}
+
+    config = FleetConfig(horizon_s=20.0, reverse_ratio=0.5)
+    coordinator = FleetCoordinator(config, CoordinatorContext(SAFETY_M, grid))
+    fleet = KinematicFleet(coordinator, {"t": ((10, 5.0, 0.0), [(2, 5)], TRUCK)})
+    fleet.run(200)
+    assert fleet.done("t")
+    path, yaw = fleet.path("t"), np.array([snap["t"][2] for snap in fleet.trace])
+    assert path[:, 0].max() < 10.5  # straight back west
+    in_lane = (path[:, 0] > 5.5) & (path[:, 0] < 9.5)
+    assert np.abs(np.cos(yaw[in_lane])).min() > 0.99 and (np.cos(yaw[in_lane]) > 0).all()  # facing east
+    assert fleet.t_s < 60  # about 8 m at half speed
+    assert coordinator.state.failures == {}
+
+
+def test_two_trucks_head_on_in_a_lane_too_narrow_to_turn_one_backs_out_and_lets_the_other_pass() -> None:
+    # a 22 m lane 1.6 m wide (no room to turn, no passing place) with both trucks in it, nose to
+    # nose 8 m apart, each bound for the far end: one must reverse out of the lane to the open floor,
+    # step aside there and come back (reverse_ratio and shelters, both opt-in: docs/fleet.md).
+    # Robots that never reverse cannot, nor can reversing robots without shelters
+    grid = grid_from_boxes((32, 10), [(5, 0, 27, 4.2), (5, 5.8, 27, 10)])
+    robots = {"a": ((20, 5.0, np.pi), [(1.5, 5)], TRUCK), "b": ((12, 5.0, 0.0), [(30.5, 5)], TRUCK)}
+    config = FleetConfig(reverse_ratio=0.5, shelters=True)
+    fleet = KinematicFleet(FleetCoordinator(config, CoordinatorContext(SAFETY_M, grid)), robots)
+    shelters = set()
+    while fleet.t_s < 300 and fleet.goals_left():
+        fleet.step(0.1)
+        shelters |= {
+            (n, tuple(fleet.coordinator.graph.xy[v]))
+            for n, v in fleet.coordinator.state.plan.sheltered.items()
+        }
+    assert fleet.done("a") and fleet.done("b")
+    # the one in the way was sent to a node off the lane first (x < 5: the open floor), then on
+    assert shelters and all(xy[0] < 5.0 or xy[0] > 27.0 for _, xy in shelters)
+    assert fleet.min_gap_m() >= SAFETY_M
+    assert fleet.coordinator.state.deadlocks == 0
+    reversed_m = 0.0  # metres driven backwards (moving against the way it faces)
+    for name in ("a", "b"):
+        trace = np.array([snap[name] for snap in fleet.trace])
+        step = np.diff(trace[:, :2], axis=0)
+        along = step[:, 0] * np.cos(trace[1:, 2]) + step[:, 1] * np.sin(trace[1:, 2])
+        reversed_m += float(-along[along < 0].sum())
+    assert reversed_m > 5.0  # out of the lane backwards
+
+    for off in (FleetConfig(), FleetConfig(reverse_ratio=0.5)):  # the defaults; reversing alone
+        stuck = KinematicFleet(FleetCoordinator(off, CoordinatorContext(SAFETY_M, grid)), robots)
+        stuck.run(120)
+        assert not stuck.done("a") and not stuck.done("b")
 
 
 def test_idle_robot_in_a_single_lane_moves_aside_and_comes_back() -> None:

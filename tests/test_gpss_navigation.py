@@ -92,6 +92,34 @@ def test_pure_pursuit_drives_a_unicycle_along_the_plan_to_the_goal() -> None:
     assert peak_w <= 0.8 + 1e-9
 
 
+def test_pure_pursuit_reverses_the_segments_marked_backwards_and_stops_at_each_cusp() -> None:
+    # east 6 m, back west 4 m reversing (still facing east), then north forwards: a route that turns
+    # back on itself, as a fleet plan gives it to a robot that backs out of a corridor
+    path = np.array([[0.0, 0.0], [6.0, 0.0], [2.0, 0.0], [2.0, 3.0]])
+    follower = PathFollower(
+        path, PursuitParams(max_speed_mps=1.0, goal_tolerance_m=0.2), (False, True, False)
+    )
+    x, y, yaw, dt = 0.0, 0.0, 0.0, 0.05
+    trace = []
+    for _ in range(int(60 / dt)):
+        v, w = follower.step(x, y, yaw, dt)
+        trace.append((x, y, yaw, v, follower.section))
+        x, y, yaw = x + v * np.cos(yaw) * dt, y + v * np.sin(yaw) * dt, yaw + w * dt
+        if follower.done:
+            break
+    assert follower.done and np.hypot(x - 2.0, y - 3.0) < 0.2
+    t = np.array(trace)
+    assert 5.7 < t[:, 0].max() < 6.3  # drove to the cusp, not past it
+    back = t[t[:, 4] == 1]
+    moving = back[np.abs(back[:, 3]) > 1e-6]
+    assert len(moving) and (moving[:, 3] < 0).all()  # reversing: negative speed ...
+    assert np.cos(moving[:, 2]).min() > 0.95  # ... facing east all the way
+    assert np.abs(back[:, 1]).max() < 0.1  # on the line
+    assert (t[t[:, 4] == 2][:, 3] >= 0).all()  # then forwards again
+    with pytest.raises(ValueError, match="3 segments"):
+        PathFollower(path, PursuitParams(), (True,))
+
+
 def test_coordinator_lets_the_first_robot_on_and_holds_the_one_that_would_cut_it_off() -> None:
     truck = AGENT_TYPES["pallet_truck"].footprint_m
     east = Intent("robot_agent_1", 1, (0.0, 0.0, 0.0), truck, np.array([[0.0, 0.0], [6.0, 0.0]]))

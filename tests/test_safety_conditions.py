@@ -30,6 +30,7 @@ from simlan_data.algorithms.safety.conditions import (
     SafetyContext,
     contact,
     enters_zone,
+    swept_region,
     unobserved,
     worst_approach,
 )
@@ -110,6 +111,31 @@ def test_zone_condition_holds_a_stopped_robot_whose_plan_leads_in() -> None:
     assert enters_zone(ctx) is not None  # released, it would drive in at its cruise speed
     ctx.plan = np.array([[ctx.estimate.pose[0], 0.0], [ctx.estimate.pose[0], -6.0]])  # type: ignore[index]
     assert enters_zone(ctx) is None  # its plan turns away
+
+
+def test_a_held_robot_whose_plan_reverses_is_swept_tail_first() -> None:
+    # a pallet truck (base_link near its nose, 1.15 m of it behind) held, its plan backing 6 m west.
+    # Swept as if it drove forwards along the plan, its nose would lead and the area swept would end
+    # 0.45 m short of where its tail goes; reversing, the tail leads (SafetyWorld.reversing)
+    params = _params()
+    ctx = _ctx(params, pose=(0.0, 0.0, 0.0))
+    ctx.held = ctx.held.__class__(STOP, "restricted_area")
+    ctx.navigating = True
+    ctx.plan = np.array([[0.0, 0.0], [-6.0, 0.0]])
+    forwards = swept_region(ctx)
+    ctx.reversing = True
+    backwards = swept_region(ctx)
+    here = footprint_polygon((0.0, 0.0, 0.0), TRUCK)
+    assert backwards.contains(here) and forwards.contains(here)
+    assert backwards.bounds[0] == pytest.approx(forwards.bounds[0] - (-TRUCK[0] - TRUCK[1]), abs=0.02)
+    # a zone just beyond what the nose-first sweep reaches: only the tail-first sweep enters it
+    x0 = forwards.bounds[0]
+    ctx.zones = params.config.__class__(
+        zones=[{"name": "bay", "polygon": [[x0 - 0.3, -2], [x0 - 0.05, -2], [x0 - 0.05, 2], [x0 - 0.3, 2]]}]
+    ).zone_shapes
+    assert enters_zone(ctx) is not None
+    ctx.reversing = False
+    assert enters_zone(ctx) is None
 
 
 def test_cpa_and_ttc_of_two_constant_velocity_agents() -> None:

@@ -98,6 +98,9 @@ class Decision:
     blocked_by: tuple[str, ...] = ()
     replan: bool = False  # look for a way around the others (see Coordinator)
     path_xy: NDArray[np.float64] | None = None  # follow this path to the goal (a fleet coordinator's route)
+    # per segment of path_xy: driven backwards (None: every segment forwards). A robot reverses
+    # out of a corridor or a dead end where it cannot turn (the fleet coordinator's plans)
+    path_reverse: tuple[bool, ...] | None = None
     # held at speed 0, may it still turn in place towards its path? (False: its whole footprint
     # stands still; a fleet plan reserves a turn's swept circle only where it plans the turn)
     turn_in_place: bool = True

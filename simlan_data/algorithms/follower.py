@@ -125,25 +125,66 @@ class PathFollower:
 
     Speed is limited by curvature, by the distance to the goal and by an external limit (the
     multi-robot coordinator, the safety layer); acceleration is bounded.
+
+    ``reverse`` (per segment of the path, optional): segments driven backwards. The path is cut
+    into sections where the direction changes; the robot drives each section to its end, stops
+    there and drives the next. Backwards it pursues the path with its tail (the mirrored unicycle:
+    heading + pi, the linear speed negated). A path that turns back on itself at a cusp is thus
+    never projected onto the wrong part.
     """
 
-    def __init__(self, path_xy: NDArray[np.float64], params: PursuitParams) -> None:
+    def __init__(
+        self, path_xy: NDArray[np.float64], params: PursuitParams, reverse: Sequence[bool] | None = None
+    ) -> None:
         self.path = np.asarray(path_xy, dtype=float).reshape(-1, 2)
         self.params = params
         seg = np.diff(self.path, axis=0)
         self._seg_len = np.linalg.norm(seg, axis=1)
         self._cum = np.concatenate([[0.0], np.cumsum(self._seg_len)])
         self.length_m = float(self._cum[-1])
+        self.reverse = tuple(bool(b) for b in reverse) if reverse is not None else None
+        if self.reverse is not None and len(self.reverse) != len(self._seg_len):
+            raise ValueError(f"reverse has {len(self.reverse)} flags for {len(self._seg_len)} segments")
+        self._ends, self._backs = self._sections()
+        self.section = 0  # the section driven now
         self._progress_m = 0.0
         self._speed = 0.0
         self._rotating = False
         self.done = self.length_m < 1e-6
 
+    def _sections(self) -> tuple[list[float], list[bool]]:
+        """Arc length at the end of each section (a run of segments driven one way) and its way."""
+        if self.reverse is None or not any(self.reverse):
+            return [self.length_m], [False]
+        ends, backs = [], [self.reverse[0]]
+        for i in range(1, len(self.reverse)):
+            if self.reverse[i] != self.reverse[i - 1]:
+                ends.append(float(self._cum[i]))
+                backs.append(self.reverse[i])
+        ends.append(self.length_m)
+        return ends, backs
+
+    @property
+    def reversing(self) -> bool:
+        """Whether the section driven now is driven backwards."""
+        return self._backs[self.section]
+
+    def ahead_xy(self) -> NDArray[np.float64]:
+        """The rest of the section driven now, from the progress so far (N >= 1, 2)."""
+        end = self._ends[self.section]
+        inner = self.path[(self._cum > self._progress_m) & (self._cum < end)]
+        return np.vstack([self.point_at(self._progress_m), inner, self.point_at(end)])
+
     def _project(self, p: NDArray[np.float64]) -> float:
-        """Arc length of the closest path point to ``p``, searched forward of the progress so far."""
+        """Arc length of the closest path point to ``p``, searched forward of the progress so far,
+        within the section driven now."""
         best_s, best_d = self._progress_m, np.inf
+        end = self._ends[self.section]
+        start = self._ends[self.section - 1] if self.section else 0.0
         for i in range(len(self._seg_len)):
-            if self._cum[i + 1] < self._progress_m - 0.5:
+            if self._cum[i] >= end - 1e-9:
+                break
+            if self._cum[i + 1] < self._progress_m - 0.5 or self._cum[i + 1] <= start + 1e-9:
                 continue
             a, L = self.path[i], self._seg_len[i]
             if L < 1e-9:
@@ -185,17 +226,27 @@ class PathFollower:
             self._speed = 0.0
             return 0.0, 0.0
         pos = np.array([x, y])
-        self._progress_m = self._project(pos)
-        goal = self.path[-1]
-        dist_goal = float(np.linalg.norm(goal - pos))
-        if dist_goal < p.goal_tolerance_m or (
-            self.remaining_m() < p.goal_tolerance_m and dist_goal < 2 * p.goal_tolerance_m
-        ):
-            self.done = True
+        while True:  # the section driven now: at its end, on to the next
+            end = self._ends[self.section]
+            self._progress_m = min(self._project(pos), end)
+            goal = self.point_at(end)
+            dist_goal = float(np.linalg.norm(goal - pos))
+            if not (
+                dist_goal < p.goal_tolerance_m
+                or (end - self._progress_m < p.goal_tolerance_m and dist_goal < 2 * p.goal_tolerance_m)
+            ):
+                break
             self._speed = 0.0
-            return 0.0, 0.0
+            if self.section == len(self._ends) - 1:
+                self.done = True
+                return 0.0, 0.0
+            self.section += 1
+            self._progress_m = end
+        back = self._backs[self.section]
+        if back:
+            yaw = yaw + np.pi  # its tail leads
         lookahead = float(np.clip(self._speed * p.lookahead_time_s, p.min_lookahead_m, p.max_lookahead_m))
-        carrot = self.point_at(self._progress_m + lookahead)
+        carrot = self.point_at(min(self._progress_m + lookahead, end))
         if np.linalg.norm(carrot - pos) < 1e-6:
             carrot = goal
         dx, dy = carrot - pos
@@ -220,4 +271,4 @@ class PathFollower:
         else:
             self._speed = min(v, self._speed + p.accel_mps2 * dt_s)
         w = float(np.clip(self._speed * curvature, -p.max_yaw_rate_rps, p.max_yaw_rate_rps))
-        return self._speed, w
+        return (-self._speed if back else self._speed), w

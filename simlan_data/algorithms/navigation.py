@@ -134,19 +134,33 @@ class Navigator:
 
     def _adopt(self, plan: Plan) -> None:
         self.plan = plan
-        self.follower = PathFollower(plan.points_xy, self.pursuit)
+        self.follower = PathFollower(plan.points_xy, self.pursuit, plan.reverse)
         self.status.plans += 1
         if self._goal_first_plan:
             self.status.planned_length_m += plan.length_m
             self._goal_first_plan = False
         self.new_plan = True
 
-    def move_aside(self, path_xy: NDArray[np.float64]) -> None:
+    def move_aside(self, path_xy: NDArray[np.float64], reverse: tuple[bool, ...] | None = None) -> None:
         """With every goal done, drive ``path_xy`` (a fleet coordinator moves an idle robot out of
-        the others' way); it counts as no goal. A path equal to the one driven is kept."""
-        if self.goal is not None or (self.aside is not None and np.array_equal(self.aside.path, path_xy)):
+        the others' way; ``reverse``: its segments driven backwards); it counts as no goal. A path
+        equal to the one driven is kept."""
+        if self.goal is not None or (
+            self.aside is not None
+            and np.array_equal(self.aside.path, path_xy)
+            and self.aside.reverse == (tuple(reverse) if reverse is not None else None)
+        ):
             return
-        self.aside = PathFollower(path_xy, self.pursuit)
+        self.aside = PathFollower(path_xy, self.pursuit, reverse)
+
+    def ahead(self) -> tuple[NDArray[np.float64] | None, bool]:
+        """The path ahead as the safety layer reads it, and whether it is driven backwards: the
+        plan, or for a route with reversing the rest of the part driven now (a route that turns
+        back on itself is not projected onto the wrong part)."""
+        follower = self.follower if self.goal is not None else self.aside
+        if follower is None or follower.reverse is None:
+            return (self.plan.points_xy if self.plan is not None else None), False
+        return follower.ahead_xy(), follower.reversing
 
     def cancel(self) -> None:
         """Drop the current plan: the safety layer stopped the robot. The goal stays; a new plan

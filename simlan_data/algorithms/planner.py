@@ -44,6 +44,7 @@ class Plan:
     points_xy: NDArray[np.float64]  # (N, 2) from start to goal
     length_m: float
     expanded: int
+    reverse: tuple[bool, ...] | None = None  # per segment: driven backwards (a fleet plan's route)
 
 
 class GridPlanner:

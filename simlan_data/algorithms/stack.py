@@ -453,16 +453,15 @@ class GpssStack:
     ) -> None:
         """Build the safety world of this tick, step the monitor on it and record its events."""
         assert self.safety is not None
+        ahead = {ns: nav.ahead() for ns, nav in self.navigators.items()}
         world = SafetyWorld(
             t_ns,
             self.robot_estimates(out.estimates, truth),
             dict(contacts or {}),
             people,
-            {
-                ns: (nav.plan.points_xy if nav.plan is not None else None)
-                for ns, nav in self.navigators.items()
-            },
+            {ns: ahead[ns][0] for ns in self.navigators},
             {ns: nav.goal is not None for ns, nav in self.navigators.items()},
+            {ns: ahead[ns][1] for ns in self.navigators},
         )
         out.safety = self.safety.step(world)
         if self._derive_events:
@@ -489,14 +488,19 @@ class GpssStack:
             self._cancelled.discard(ns)
             decision = out.decisions.get(ns)
             if decision is not None and decision.path_xy is not None:
-                self._follow_route(nav, decision.path_xy)
+                self._follow_route(nav, decision.path_xy, decision.path_reverse)
             if decision is not None and decision.replan and ns in poses:
                 self._detour(ns, poses[ns], [i for i in intents if i.namespace != ns])
             if guard.speed_limit_mps is not None:
                 limits = [guard.speed_limit_mps] + (
                     [] if decision is None or decision.speed_limit_mps is None else [decision.speed_limit_mps]
                 )
-                decision = Decision(min(limits), decision.blocked_by if decision else (), False)
+                # (the coordinator's other fields stay: a robot it holds must not turn in place)
+                decision = (
+                    replace(decision, speed_limit_mps=min(limits), replan=False)
+                    if decision is not None
+                    else Decision(min(limits))
+                )
             v, w = nav.step(poses.get(ns), dt_s, decision)
             out.commands[ns] = clamp_command(guard, v, w)
         for ns, walker in self.walkers.items():
@@ -505,15 +509,20 @@ class GpssStack:
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
 
     @staticmethod
-    def _follow_route(nav: Navigator, path_xy: NDArray[np.float64]) -> None:
-        """Follow the coordinator's route (a fleet plan) unless it is the path followed already."""
+    def _follow_route(nav: Navigator, path_xy: NDArray[np.float64], reverse: tuple[bool, ...] | None) -> None:
+        """Follow the coordinator's route (a fleet plan; ``reverse``: segments driven backwards)
+        unless it is the path followed already."""
         if nav.goal is None:  # every goal done: the coordinator moves it out of the others' way
-            nav.move_aside(path_xy)
+            nav.move_aside(path_xy, reverse)
             return
-        if nav.plan is not None and np.array_equal(nav.plan.points_xy, path_xy):
+        if (
+            nav.plan is not None
+            and np.array_equal(nav.plan.points_xy, path_xy)
+            and nav.plan.reverse == reverse
+        ):
             return
         length = float(np.sum(np.linalg.norm(np.diff(path_xy, axis=0), axis=1)))
-        nav.adopt(Plan(path_xy, length, 0))
+        nav.adopt(Plan(path_xy, length, 0, reverse))
 
     def safety_states(self) -> dict[str, tuple[SafetyDecision, Monitor]]:
         """Every guarded robot's decision and state-topic values after the last control tick: the

@@ -41,6 +41,7 @@ class _Robot:
     fp: Footprint
     speed_mps: float
     path: NDArray[np.float64] | None = None
+    reverse: tuple[bool, ...] | None = None  # per segment of ``path``: driven backwards
     s: float = 0.0  # metres along ``path``
     dwell_until_s: float | None = None  # at a goal until then (served at a dock), then on
     reached: int = 0
@@ -87,6 +88,8 @@ class KinematicFleet:
             if d.path_xy is not None and (r.path is None or not np.array_equal(r.path, d.path_xy)):
                 r.path = np.asarray(d.path_xy, dtype=float)
                 r.s = _along(r.path, np.asarray(r.pose[:2]))
+            if d.path_xy is not None:
+                r.reverse = d.path_reverse
             if r.path is None:
                 continue
             self._drive(
@@ -103,7 +106,10 @@ class KinematicFleet:
         xy = np.array([np.interp(r.s, cum, r.path[:, i]) for i in (0, 1)])
         step = xy - np.asarray(r.pose[:2])
         yaw = float(np.arctan2(step[1], step[0])) if np.hypot(*step) > 1e-6 else r.pose[2]
-        r.pose = [float(xy[0]), float(xy[1]), yaw]  # it faces where it drives
+        k = min(int(np.searchsorted(cum, r.s, side="left")) - 1, len(cum) - 2)
+        if np.hypot(*step) > 1e-6 and r.reverse is not None and r.reverse[max(k, 0)]:
+            yaw = float(np.arctan2(-step[1], -step[0]))  # it faces away from where it drives
+        r.pose = [float(xy[0]), float(xy[1]), yaw]  # it faces where it drives (or reverses)
         if r.goals and r.s >= cum[-1] - 1e-9 and np.hypot(*(xy - np.asarray(r.goals[0]))) < 0.3:
             self.arrivals.append((self.t_s, name, r.goals[0]))
             r.dwell_until_s, r.path = self.t_s + self.dwell_s, None
@@ -177,12 +183,14 @@ def mission_fleet(
     safety_m: float = 0.6,
     cameras: Sequence[CameraModel] = (),
     types: Sequence[str] | None = None,
+    config: FleetConfig | None = None,
 ) -> tuple[KinematicFleet, dict[str, AgentType]]:
     """The seeded missions of ``scenario=fleet`` (same generator and seed as a run) on the real
     layout's occupancy grid, driven by ``algorithms/coordinator=fleet``: the kinematic fleet and each
     robot's agent type. ``safety_m``: navigation.safety_distance_m (its default). With ``cameras``
     (robots that steer on them, as in a run): missions on the floor they see, and the coordinator
-    given that floor as the run's stack gives it (``CoordinatorContext.seen``)."""
+    given that floor as the run's stack gives it (``CoordinatorContext.seen``). ``config``: the
+    coordinator's (default: ``FleetConfig()``)."""
     spec_cfg = MissionsConfig(robots=robots, tasks=tasks)
     if types is not None:
         spec_cfg = MissionsConfig(robots=robots, tasks=tasks, types=list(types))
@@ -193,7 +201,7 @@ def mission_fleet(
     floors = robot_floors(grid, cameras, kinds.values(), clearance_m=CLEARANCE_M) if cameras else {}
     if floors:
         seen = seen_by_all(floors.values()).by_heading
-    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(safety_m, grid, seen))
+    coordinator = FleetCoordinator(config or FleetConfig(), CoordinatorContext(safety_m, grid, seen))
     spec = {
         n: (tuple(a["pose"]), [tuple(g) for g in a["goals"]], kinds[n].footprint_m, a["speed_mps"])
         for n, a in missions.agents.items()

@@ -13,7 +13,6 @@ speed limit that stops it before the first vertex it may not enter yet.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
@@ -48,6 +47,7 @@ class _Robot:
     goal: tuple[float, float] | None = None
     park: tuple[float, float] | None = None  # idle (every goal done): where it stands when not in the way
     path_xy: NDArray[np.float64] | None = None
+    path_reverse: tuple[bool, ...] | None = None  # per segment of path_xy: driven backwards
     moved_at_ns: int = 0
     moved_from: tuple[float, float] = (0.0, 0.0)
     waiting_since_ns: int | None = None
@@ -230,7 +230,13 @@ class FleetCoordinator:
                     idle=i.priority >= IDLE_PRIORITY,
                 )
             )
-        timing = Timing(self.config.spacing_m, self.config.horizon_steps, self.safety_m)
+        timing = Timing(
+            self.config.spacing_m,
+            self.config.horizon_steps,
+            self.safety_m,
+            reverse_ratio=self.config.reverse_ratio,
+            shelters=self.config.shelters,
+        )
         plan = plan_fleet(graph, requests, obstacles, timing)
         self.state.plan, self.state.planned_at_ns = plan, t_ns
         self.state.routes = build_routes(plan, self.safety_m)
@@ -245,7 +251,12 @@ class FleetCoordinator:
                 # robot's goal that robot queued for ever (4 robots, seed 7); parked here, it is
                 # planned last and moves aside when a robot with a goal needs the place
                 r.park = (float(i.pose_xyyaw[0]), float(i.pose_xyyaw[1]))
-            r.path_xy = None if route is None else self._path(graph, route, i)
+            if route is None:
+                r.path_xy, r.path_reverse = None, None
+            else:
+                r.path_xy, r.path_reverse = self._path(
+                    graph, route, i, plan.plans[i.namespace].vertices[-1].turn
+                )
 
     def _order_key(self, intent: Intent) -> tuple[bool, int, int, str]:
         """Planning order: the order the last plan settled on (after its promotions), then the
@@ -272,13 +283,25 @@ class FleetCoordinator:
             self._clearance = self.grid.clearance_m()
         return float(self._clearance[cell])
 
-    def _path(self, graph: RouteGraph, route: Route, intent: Intent) -> NDArray[np.float64]:
-        """The path the navigator follows: from the robot through the route's vertices to its goal."""
+    def _path(
+        self, graph: RouteGraph, route: Route, intent: Intent, turns_last: bool
+    ) -> tuple[NDArray[np.float64], tuple[bool, ...] | None]:
+        """The path the navigator follows: from the robot through the route's vertices to its goal,
+        and per segment whether it is driven backwards (None: none is). The way from the last
+        vertex to the goal is driven as the robot arrived there, unless it turns there."""
         pts = [np.asarray(intent.pose_xyyaw[:2], dtype=float)] + [graph.xy[n] for n in route.nodes[1:]]
+        backs = list(route.backs[1:])
         if intent.goal_xy is not None:
             pts.append(np.asarray(intent.goal_xy, dtype=float))
-        keep = [pts[0]] + [p for a, p in itertools.pairwise(pts) if np.linalg.norm(p - a) > 1e-6]
-        return np.asarray(keep if len(keep) >= 2 else [pts[0], pts[0]])
+            backs.append(bool(route.backs[-1]) and not turns_last)
+        keep, flags = [pts[0]], []
+        for a, p, back in zip(pts, pts[1:], backs):
+            if np.linalg.norm(p - a) > 1e-6:
+                keep.append(p)
+                flags.append(back)
+        if len(keep) < 2:
+            return np.asarray([pts[0], pts[0]]), None
+        return np.asarray(keep), (tuple(flags) if any(flags) else None)
 
     def _decisions(
         self, t_ns: int, graph: RouteGraph, movers: list[Intent], intents: list[Intent]
@@ -313,7 +336,11 @@ class FleetCoordinator:
                 r.waiting_since_ns = None
             # held at its frontier it stands still: a turn's circle is reserved only where planned
             out[ns] = Decision(
-                limit, tuple(holders) if limit == 0.0 else (), path_xy=r.path_xy, turn_in_place=limit != 0.0
+                limit,
+                tuple(holders) if limit == 0.0 else (),
+                path_xy=r.path_xy,
+                turn_in_place=limit != 0.0,
+                path_reverse=r.path_reverse,
             )
         self._check_deadlock(t_ns, waits, movers)
         return out

@@ -12,7 +12,7 @@ collision, a fault) breaks that; the coordinator then replans with it as an obst
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,7 @@ class Route:
     rank: int  # its place in the priority order the plan used
     progress: int = 0  # the last vertex it has reached
     deps: list[list[tuple[str, int]]] | None = None  # per vertex: (robot, vertex) it must wait for
+    backs: list[bool] = field(default_factory=list)  # per vertex: it drives there reversing
 
     @classmethod
     def from_plan(cls, plan: RobotPlan, rank: int) -> Route:
@@ -47,6 +48,7 @@ class Route:
             [v.occ for v in vs],
             [v.loose for v in vs],
             rank,
+            backs=[v.back for v in vs],
         )
 
     def acquire(self, m: int) -> float:

@@ -36,6 +36,11 @@ class Shape:
         reach = float(np.hypot(max(abs(x0), abs(x1)), half))
         return cls(min(x0, 0.0), max(x1, 0.0), half + tolerance_m, reach + tolerance_m)
 
+    def reversed(self) -> Shape:
+        """The same footprint facing the other way (a robot reversing sweeps what it would
+        driving forwards with this shape)."""
+        return Shape(-self.front_m, -self.back_m, self.half_width_m, self.reach_m)
+
 
 def region(*parts: Region) -> Region:
     """The union of regions."""

@@ -55,6 +55,8 @@ class Vertex:
     depart: int | None  # step it starts for the next vertex (None: it stays)
     occ: Region  # what it holds from leaving the vertex before until arriving at the one after
     loose: bool = False  # where it stands now, or its way off it: kept off others, not the safety distance
+    back: bool = False  # it drives here from the vertex before reversing
+    turn: bool = False  # it may turn in place here (after arriving)
 
 
 @dataclass
@@ -83,6 +85,10 @@ class FleetPlan:
     order: list[str] = field(default_factory=list)  # the priority order that was used
     # robot -> robots planned after it whose standing place keeps it from its goal
     blockers: dict[str, list[str]] = field(default_factory=dict)
+    # (robot, its blocker) -> the nearest node where the blocker would stand clear of the robot's
+    # way to its goal (None: there is none)
+    shelters: dict[tuple[str, str], int | None] = field(default_factory=dict)
+    sheltered: dict[str, int] = field(default_factory=dict)  # robot -> the node it was sent to instead
 
 
 @dataclass(frozen=True)
@@ -93,6 +99,10 @@ class Timing:
     horizon: int  # steps
     safety_m: float  # distance kept between two robots' regions
     turn_tolerance_rad: float = math.radians(50.0)  # larger heading changes need a turn in place
+    # planned reversing speed as a share of the forward speed (an arc driven backwards takes
+    # 1 / reverse_ratio as many steps); 0: it never reverses
+    reverse_ratio: float = 0.0
+    shelters: bool = False  # a robot in another's way may be sent to a shelter first (schedule.py)
 
     def steps(self, length_m: float) -> int:
         return max(1, math.ceil(length_m / self.spacing_m - 1e-6))

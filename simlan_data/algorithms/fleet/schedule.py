@@ -16,18 +16,26 @@ their half widths plus the safety distance apart; one robot at a time in an inte
 head-on entry into a single lane follow from the geometry, whatever the layout.
 
 A robot turns by more than ``turn_tolerance_rad`` only at a vertex where it is planned to turn in
-place, and only where the clearance covers its reach (its tail does not sweep into a shelf). A robot
+place, and only where the clearance covers its reach (its tail does not sweep into a shelf); it
+may drive an arc backwards (``Timing.reverse_ratio``). A robot
 whose planning fails moves to the front of the order and everyone is planned again (priority
 inheritance, at most once per robot). A goal held by a robot planned earlier (a dock) queues the
-robot at the nearest free node outside it. A robot still failing stands where it is as an obstacle
-and is reported (``unreachable`` when its goal lies outside the graph's component, ``blocked``
-otherwise).
+robot at the nearest free node outside it. Where that is not enough (two robots nose to nose in a
+lane neither can turn in: whoever goes first, the other cannot get out of its way in time), a robot
+that stands on another's way to its goal is sent first to a *shelter*, the nearest node where it
+stands clear of that way, and the other is planned after it (once per pair, so planning ends; the
+sheltered robot's plan is incomplete, so it is planned to its own goal again at a later replan). A
+robot still failing stands where it is as an obstacle and is reported (``unreachable`` when its
+goal lies outside the graph's component, ``blocked`` otherwise).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import NDArray
+from scipy.sparse.csgraph import dijkstra
 
 from simlan_data.algorithms.fleet import footprint as fp
 from simlan_data.algorithms.fleet.conflicts import ConflictCache
@@ -64,6 +72,7 @@ class Reservations:
         # get out of the way; after it, a robot planned earlier may take the place and the later one
         # must leave in time, or fail and go first)
         self.waiting: dict[str, tuple[Region, int, bool]] = {}  # region, until, idle
+        self.free_way: dict[str, Region] = {}  # robot -> its way to its goal were nobody else there
         self.conflicts = ConflictCache(self)
 
     def set_waiting(self, waiting: dict[str, tuple[Region, int, bool]]) -> None:
@@ -120,19 +129,29 @@ def plan_fleet(
     promoted: set[str] = set()
     standing: set[str] = set()  # failed even when first: stands still, for everyone
     ahead: set[tuple[str, str]] = set()  # (blocker, robot): the blocker was moved before it once
+    sheltered: dict[str, int] = {}  # robot -> the shelter it is planned to instead of its goal
+    tried: set[tuple[str, str]] = set()  # (robot, blocker) pairs given a shelter once
     while True:
-        result = _plan_in_order(graph, [by_name[n] for n in order], obstacles, timing, standing)
+        requests = [by_name[n] for n in order]
+        result = _plan_in_order(graph, requests, obstacles, timing, standing, sheltered)
         moved = _blockers_first(order, result.blockers, ahead)
         if moved is not None:
             order = moved  # a robot standing in an earlier one's way is planned (out of it) first
             continue
         failed = [n for n in order if n in result.failures and n not in standing]
         if not failed:
-            result.order = order
+            result.order, result.sheltered = order, dict(sheltered)
             return result
         first = failed[0]
         if first in promoted or by_name[first].idle:  # no plan even first (an idle robot never goes
-            # first): the others must plan around where it stands
+            # first): a robot on another's way goes to a shelter first; else the others must plan
+            # around where it stands
+            shelter = _next_shelter(result, tried, sheltered) if timing.shelters else None
+            if shelter is not None:
+                blocker, node = shelter
+                sheltered[blocker] = node
+                order = [blocker] + [n for n in order if n != blocker]
+                continue
             standing.add(first)
             continue
         promoted.add(first)  # priority inheritance: it goes first, everyone is planned again
@@ -154,6 +173,20 @@ def _blockers_first(
     return None
 
 
+def _next_shelter(
+    result: FleetPlan, tried: set[tuple[str, str]], sheltered: dict[str, int]
+) -> tuple[str, int] | None:
+    """The first (robot, robot in its way) pair not tried yet whose second has a shelter off the
+    first's way: (that robot, shelter node); marks the pair tried."""
+    for (name, b), node in result.shelters.items():
+        if (name, b) in tried or b in sheltered:
+            continue
+        tried.add((name, b))
+        if node is not None:
+            return b, node
+    return None
+
+
 def _standing(r: Request) -> RobotPlan:
     occ = start_region(r, turn=False)
     return RobotPlan(r.name, [Vertex(r.start, 0, None, occ, loose=True)], r.start, complete=False)
@@ -165,7 +198,9 @@ def _plan_in_order(
     obstacles: list[Obstacle],
     timing: Timing,
     standing: set[str],
+    sheltered: dict[str, int] | None = None,
 ) -> FleetPlan:
+    sheltered = sheltered or {}
     table = Reservations(graph, timing.horizon, timing.safety_m)
     for o in obstacles:
         table.add_static(o.region())
@@ -184,12 +219,31 @@ def _plan_in_order(
     # a robot keeps off where the robots after it stand (they may not get away in time: a robot
     # planned earlier does not drive through one that cannot turn or has nowhere to go)
     waiting = {r.name: (start_region(r, turn=False), _clear_steps(r, timing), r.idle) for r in pending}
+    by_name = {r.name: r for r in pending}
     for r in pending:
         del waiting[r.name]
         table.set_waiting(dict(waiting))
-        plan = _plan_one(graph, r, table, timing)
-        if waiting and (plan is None or not plan.complete):
+        shelter = sheltered.get(r.name)
+        if shelter is not None:  # it clears another's way first (planned to its own goal later)
+            plan = _plan_one(graph, replace(r, goal=shelter, goal_xy=None), table, timing, queue=False)
+            if plan is not None:
+                plan.complete = False
+        else:
+            plan = _plan_one(graph, r, table, timing)
+        if waiting and shelter is None and (plan is None or not plan.complete):
             out.blockers[r.name] = _blocking(graph, r, table, timing, waiting)
+            way = table.free_way.get(r.name)
+            for b in out.blockers[r.name] if timing.shelters else []:
+                out.shelters[(r.name, b)] = _shelter(graph, by_name[b], table, timing, way)
+        if plan is None and shelter is None and timing.shelters:
+            # whose plan drives through where it stands (it could not get out of the way in time)
+            here = start_region(r, turn=False)
+            for e, p in out.plans.items():
+                if e not in out.failures and any(
+                    fp.conflict(v.occ, here, timing.safety_m) for v in p.vertices[1:]
+                ):
+                    way = fp.region(*[v.occ for v in p.vertices])
+                    out.shelters[(e, r.name)] = _shelter(graph, r, table, timing, way)
         if plan is None:
             out.failures[r.name] = "blocked"
             plan = _standing(r)
@@ -206,7 +260,8 @@ def _blocking(
     waiting: dict[str, tuple[Region, int, bool]],
 ) -> list[str]:
     """The robots not planned yet whose standing places keep ``r`` from its goal: those its plan
-    would cross if they were not there (none when it cannot reach its goal even then)."""
+    would cross if they were not there (none when it cannot reach its goal even then). The way
+    that plan takes is kept in ``table.free_way[r.name]`` (for shelters)."""
     table.set_waiting({})
     try:  # (one search: the goal, no queue; only a plan that arrives counts)
         free = _plan_one(graph, r, table, timing, queue=False, complete_only=True)
@@ -214,12 +269,36 @@ def _blocking(
         table.set_waiting(waiting)
     if free is None or not free.complete or free.queued:
         return []
+    table.free_way[r.name] = fp.region(*[v.occ for v in free.vertices])
     return [
         n
         for n, (standing, _, idle) in waiting.items()
         if not idle
         and any(fp.conflict(v.occ, standing, 0.0 if v.loose else timing.safety_m) for v in free.vertices)
     ]
+
+
+def _shelter(
+    graph: RouteGraph, b: Request, table: Reservations, timing: Timing, way: Region | None
+) -> int | None:
+    """The node nearest to ``b`` (route length) where ``b``, turned any way, stands clear of
+    another robot's ``way`` to its goal and of whatever stays held; None if there is none."""
+    if way is None:
+        return None
+    xy = graph.xy
+    reach = b.shape.reach_m
+    d = fp.segment_distances(xy, xy, way[0], way[1])
+    clear = ~(d < reach + way[2][None, :] + timing.safety_m).any(axis=1)
+    clear &= ~table.blocked_nodes(None, reach)
+    clear &= graph.components == graph.components[b.start]
+    if graph.seen_node is not None:
+        clear &= graph.seen_node  # where the cameras see it at every heading: it is not lost there
+    if not clear.any():
+        return None
+    dist = np.asarray(dijkstra(graph.matrix, directed=False, indices=b.start))
+    dist[~clear] = np.inf
+    node = int(np.argmin(dist))
+    return node if np.isfinite(dist[node]) else None
 
 
 def _clear_steps(r: Request, timing: Timing) -> int:

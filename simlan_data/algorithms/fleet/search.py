@@ -1,7 +1,9 @@
 """One robot's space-time search against the reservation table (``schedule.py`` orders the robots).
 
-A *place* is (node, the node it came from, whether it turns in place here); what the robot holds
-there is its footprint's region (``footprint.py``, see ``schedule.py``). The search runs over safe
+A *place* is (node, the node it came from, whether it turns in place here, whether it came
+reversing); what the robot holds there is its footprint's region (``footprint.py``, see
+``schedule.py``). With ``Timing.reverse_ratio`` > 0 a robot may drive an arc backwards (taking
+1 / reverse_ratio as many steps), holding what driving it forwards the other way holds. The search runs over safe
 intervals (SIPP, Phillips & Likhachev 2011): a state is a place and one maximal run of plan steps
 in which that region is free of reservations, reached at its earliest step; waiting is implicit
 (it may stay as long as the interval lasts), so a robot that must wait costs one state, not one per
@@ -47,7 +49,7 @@ MAX_EXPANSIONS = 40_000  # a search that expands more states than this gives up 
 QUEUE_EXPANSIONS = 4_000  # the same for a search to a queue node (near; up to 12 are tried)
 
 
-Place = tuple[int, int, bool]  # node, previous node (START, FROM_START), turns here
+Place = tuple[int, int, bool, bool]  # node, previous node (START, FROM_START), turns here, came reversing
 Key = tuple[Place, int]  # a place and one of its safe intervals (its index)
 Link = tuple[Key, int, int]  # the key before, the step it left it, the step it arrived
 
@@ -70,49 +72,64 @@ class Search:
         self._ever_bad: list[bool] = []
         self._always = [(1, timing.horizon)]
         self.target = -1
+        self.reversing = timing.reverse_ratio > 0.0  # it may drive an arc backwards
 
     # ------------------------------------------------------------------ geometry
-    def heading(self, node: int, prev: int) -> float | None:
+    def heading(self, node: int, prev: int, back: bool = False) -> float | None:
+        """Where the robot faces at ``node`` having come from ``prev`` (``back``: reversing)."""
         if prev == START:
             return self.r.heading_rad
         if prev >= 0:
-            return self.graph.arc_angle[(prev, node)]
+            angle = self.graph.arc_angle[(prev, node)]
+            return angle + math.pi if back else angle
         d = self.graph.xy[node] - self.start_xy
         if node == self.r.start and np.hypot(*d) < SNAP_M:
             return self.r.heading_rad  # a step onto its own node is a correction, not a turn
-        return float(np.arctan2(d[1], d[0])) if np.hypot(*d) > 1e-9 else None
+        if np.hypot(*d) <= 1e-9:
+            return None
+        angle = float(np.arctan2(d[1], d[0]))
+        return angle + math.pi if back else angle
 
-    def occ(self, node: int, prev: int, turn: bool) -> Region:
+    def occ(self, node: int, prev: int, turn: bool, back: bool = False) -> Region:
         """What the robot holds for a vertex (see the module docstring)."""
-        units, specials = self._units(node, prev, turn)
+        units, specials = self._units(node, prev, turn, back)
         parts = [self._special(k) for k in specials]
         parts += [self.pieces.piece(u) for u in units]
         return fp.region(*parts)
 
-    def _units(self, node: int, prev: int, turn: bool) -> tuple[list[int], list[tuple]]:
-        """A vertex's region as shared pieces (arcs, circles) and pieces of this search only."""
+    def _units(self, node: int, prev: int, turn: bool, back: bool = False) -> tuple[list[int], list[tuple]]:
+        """A vertex's region as shared pieces (arcs, circles) and pieces of this search only.
+        Reversing from ``prev`` to ``node`` the footprint sweeps what driving forwards from ``node``
+        to ``prev`` sweeps (the same capsule): the reversed arc's piece."""
         units: list[int] = []
         specials: list[tuple] = []
         if prev == START:
             return units, [("start", turn)]
         if prev == FROM_START:
-            specials.append(("from_start", node))
+            specials.append(("from_start", node, back))
         else:
-            units.append(self.graph.arc_index[(prev, node)])
+            units.append(self.graph.arc_index[(node, prev) if back else (prev, node)])
         if turn:
             units.append(self.pieces.n_arcs + node)
         if node == self.target and self.tail is not None:
-            specials.append(("tail", node, self.tail))
+            specials.append(("tail", node, self.tail, back and not turn))
         return units, specials
 
     def _special(self, key: tuple) -> Region:
         if key not in self._regions:
             if key[0] == "start":
                 self._regions[key] = start_region(self.r, turn=key[1])
-            elif key[0] == "from_start":
-                self._regions[key] = fp.drive(self.r.shape, self.start_xy, self.graph.xy[key[1]])
-            else:
-                self._regions[key] = fp.drive(self.r.shape, self.graph.xy[key[1]], np.asarray(key[2]))
+            else:  # driving off the start pose onto a node, or from the target node to the real goal
+                a, b = (
+                    (self.start_xy, self.graph.xy[key[1]])
+                    if key[0] == "from_start"
+                    else (
+                        self.graph.xy[key[1]],
+                        np.asarray(key[2]),
+                    )
+                )
+                shape = self.r.shape.reversed() if key[-1] else self.r.shape
+                self._regions[key] = fp.drive(shape, a, b)
         return self._regions[key]
 
     def held_at(self, node: int, step: int) -> bool:
@@ -144,6 +161,8 @@ class Search:
         best = math.inf
         for v, length, angle in self._arcs(r.start, START):
             if r.heading_rad is not None and length > 1e-9 and not self.turns.within(r.heading_rad, angle):
+                if self.reversing and self.turns.within(r.heading_rad, angle + math.pi):
+                    best = min(best, length + to.facing(v, angle + math.pi))
                 continue
             rest = to.facing(v, angle) if v == r.start else to.arc[self.graph.arc_index[(r.start, v)]]
             best = min(best, length + rest)
@@ -151,12 +170,12 @@ class Search:
 
     def _h(self, to: ToGoal, place: Place) -> float:
         """The guide's steps to the goal from a place (after the start)."""
-        v, came, turn = place
+        v, came, turn, back = place
         if turn:
             return to.node[v] / self.timing.spacing_m
-        if came >= 0:
+        if came >= 0 and not back:
             return to.arc[self.graph.arc_index[(came, v)]] / self.timing.spacing_m
-        return to.facing(v, self.heading(v, came)) / self.timing.spacing_m
+        return to.facing(v, self.heading(v, came, back)) / self.timing.spacing_m
 
     # ------------------------------------------------------------------ search
     def run(
@@ -184,8 +203,8 @@ class Search:
             exits: ToGoal | None = self.to_goal(then, forward=True)
         else:
             exits = self.to_goal(target, forward=True) if to.plain else None
-        if exits is not None and not math.isfinite(self.start_h(exits)):
-            exits = None  # already in such a place: it can only try
+        if exits is not None and (self.reversing or not math.isfinite(self.start_h(exits))):
+            exits = None  # already in such a place: it can only try (or it reverses out of them)
         parent: dict[Key, Link | None] = {}
         best: dict[Key, int] = {}
         heap: list[tuple[float, int, int, int, Key, bool]] = []  # f, -arrival, tie, arrival, key, to horizon
@@ -204,7 +223,7 @@ class Search:
                 continue
             closed.add(key)
             self.expanded += 1
-            (u, prev, _), end = key[0], self._intervals(key[0])[key[1]][1]
+            (u, prev, _, _), end = key[0], self._intervals(key[0])[key[1]][1]
             if u == target and (prev != START or r.start == target) and end >= horizon:
                 return self._plan(parent, key, complete=True)
             if t >= horizon:
@@ -223,9 +242,9 @@ class Search:
         for turn in (False, True):
             if (turn and not r.start_turnable) or not math.isfinite(self._start_h(to, turn)):
                 continue
-            ivs = self._intervals((r.start, START, turn))
+            ivs = self._intervals((r.start, START, turn, False))
             if ivs and ivs[0][0] == 1:
-                out.append((r.start, START, turn))
+                out.append((r.start, START, turn, False))
         return out
 
     def _moves(
@@ -247,33 +266,35 @@ class Search:
     def _next_places(self, place: Place, to: ToGoal, exits: ToGoal | None) -> list[tuple[Place, int, float]]:
         """(next place, steps to drive there, guide there) of each move from ``place``; not into a
         place whose forward-only length to the target (``exits``) is infinite."""
-        u, prev, turn = place
-        heading = self.heading(u, prev)
+        u, prev, turn, back = place
+        heading = self.heading(u, prev, back)
         came = FROM_START if prev == START else u
-        tolerance, steps, turnable = self.timing.turn_tolerance_rad, self.timing.steps, self.turnable
+        steps, turnable, within = self.timing.steps, self.turnable, self.turns.within
+        free = heading is None or turn  # it may leave in any direction (forwards)
         out = []
         for v, length, angle in self._arcs(u, prev):
-            if heading is not None and not turn and length > 1e-9:
-                off = abs((angle - heading + math.pi) % (2 * math.pi) - math.pi)
-                if off > tolerance:
-                    continue
-            s = steps(length)
-            for turn2 in (False, True) if turnable[v] else (False,):
-                place2 = (v, came, turn2)
-                h2 = self._h(to, place2)
-                if math.isfinite(h2) and (exits is None or math.isfinite(self._h(exits, place2))):
-                    out.append((place2, s, h2))
+            ways = []  # (reversing, steps)
+            if free or length <= 1e-9 or within(cast(float, heading), angle):
+                ways.append((False, steps(length)))
+            elif self.reversing and within(cast(float, heading), angle + math.pi):
+                ways.append((True, steps(length / self.timing.reverse_ratio)))
+            for back2, s in ways:
+                for turn2 in (False, True) if turnable[v] else (False,):
+                    place2 = (v, came, turn2, back2)
+                    h2 = self._h(to, place2)
+                    if math.isfinite(h2) and (exits is None or math.isfinite(self._h(exits, place2))):
+                        out.append((place2, s, h2))
         return out
 
     def _intervals(self, place: Place) -> list[tuple[int, int]]:
         """Maximal runs of steps (first, last; within 1..horizon) in which what the robot holds at
         ``place`` is free of reservations."""
-        node, prev, turn = place
-        key = (node, prev, turn, self.tail) if node == self.target else place
+        node, prev, turn, back = place
+        key = (*place, self.tail) if node == self.target else place
         got = self._ivs.get(key)
         if got is not None:
             return got
-        units, specials = self._units(node, prev, turn)
+        units, specials = self._units(node, prev, turn, back)
         bad = self._bad_matrix()
         if not specials and (bad is None or not any(self._ever_bad[u] for u in units)):
             out = self._always  # nothing is ever reserved there (most places)
@@ -343,9 +364,10 @@ class Search:
         chain.reverse()
         place0 = key[0]
         vertices = [Vertex(place0[0], 0, None, self.occ(place0[0], START, place0[2]), loose=True)]
-        for (v, came, turn), depart, arrive in chain:
+        for (v, came, turn, back), depart, arrive in chain:
             vertices[-1].depart = depart
-            vertices.append(Vertex(v, arrive, None, self.occ(v, came, turn), loose=came == FROM_START))
+            occ = self.occ(v, came, turn, back)
+            vertices.append(Vertex(v, arrive, None, occ, loose=came == FROM_START, back=back, turn=turn))
         return RobotPlan(
             self.r.name, vertices, self.target, complete=complete and vertices[-1].node == self.target
         )

@@ -1,7 +1,8 @@
 """Route lengths for a robot that drives forwards and turns in place only where it has room.
 
-A robot on the route graph cannot reverse, and it changes heading by more than the turn tolerance
-only at a node whose clearance covers its reach (``RouteGraph.turnable``). Plain graph distances
+A robot on the route graph that cannot reverse (``Timing.reverse_ratio`` 0, the default) changes
+heading by more than the turn tolerance only at a node whose clearance covers its reach
+(``RouteGraph.turnable``). Plain graph distances
 ignore both: from inside a single-lane aisle facing a dead end, the way back looks short although
 the robot can never take it, and a windowed plan guided by them left a pallet truck standing in
 the upper aisle for the rest of an 8-robot mission. The search (``search.py``) is guided by plain

@@ -22,6 +22,7 @@ from simlan_data.algorithms.safety.geometry import (
     stopping_distance_m,
     swept_path,
     swept_rollout,
+    tail_first,
 )
 from simlan_data.algorithms.safety.params import TreeParams
 
@@ -72,6 +73,8 @@ class SafetyWorld:
     people: list[Mover] = field(default_factory=list)
     plans: dict[str, NDArray[np.float64] | None] = field(default_factory=dict)
     navigating: dict[str, bool] = field(default_factory=dict)
+    # robots whose plan (the part ahead, as ``plans`` gives it) is driven backwards
+    reversing: dict[str, bool] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -135,6 +138,7 @@ class SafetyContext:
     others: list[Mover] = field(default_factory=list)
     plan: NDArray[np.float64] | None = None  # the last plan seen (kept when navigation drops it)
     navigating: bool = False
+    reversing: bool = False  # its plan ahead is driven backwards (its tail leads)
     held: SafetyDecision = FREE
     finding: Finding | None = None
     decision: SafetyDecision = FREE
@@ -183,18 +187,19 @@ def swept_region(ctx: SafetyContext) -> Any:
     est = ctx.estimate
     assert est.pose is not None
     reaction = ctx.params.reaction_s
+    pose, footprint = est.pose, ctx.spec.footprint
+    if ctx.intended and ctx.navigating and ctx.reversing:
+        pose, footprint = tail_first(pose, footprint)  # the same rectangle: it sets off backwards
     if ctx.intended and ctx.navigating and ctx.plan is not None:
         length = stopping_distance_m(ctx.spec.cruise_mps, p.decel_mps2, reaction) + p.lookahead_m
-        region = swept_path(
-            est.pose, ctx.spec.footprint, path_ahead(ctx.plan, est.pose[0], est.pose[1], length)
-        )
+        region = swept_path(pose, footprint, path_ahead(ctx.plan, pose[0], pose[1], length))
     else:
         speed = est.speed_mps
         if ctx.intended and ctx.navigating:
             speed = max(abs(speed), ctx.spec.cruise_mps)
         region = swept_rollout(
-            est.pose,
-            ctx.spec.footprint,
+            pose,
+            footprint,
             speed,
             est.yaw_rate_rps,
             decel_mps2=p.decel_mps2,

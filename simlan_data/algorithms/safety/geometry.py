@@ -89,6 +89,13 @@ def footprint_polygon(pose: Pose2D, footprint: Footprint, *, grow_m: float = 0.0
     return affinity.translate(affinity.rotate(rect, yaw, origin=(0, 0), use_radians=True), x, y)
 
 
+def tail_first(pose: Pose2D, footprint: Footprint) -> tuple[Pose2D, Footprint]:
+    """The same rectangle described facing the other way (heading + pi): a robot driving backwards
+    moves "forwards" in this description, so sweeps and rollouts need no sign of their own."""
+    x0, x1, y0, y1 = footprint
+    return (pose[0], pose[1], pose[2] + np.pi), (-x1, -x0, -y1, -y0)
+
+
 def footprint_centre(pose: Pose2D, footprint: Footprint) -> NDArray[np.float64]:
     """Centre of the footprint rectangle in the map (base_link need not be at the centre)."""
     x, y, yaw = pose

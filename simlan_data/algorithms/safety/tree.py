@@ -217,12 +217,13 @@ class RobotSafetyTree:
         others: Sequence[Mover] = (),
         plan: NDArray[np.float64] | None = None,
         navigating: bool = False,
+        reversing: bool = False,
     ) -> SafetyDecision:
         ctx = self.ctx
         ctx.stamp_ns, ctx.estimate, ctx.contact = stamp_ns, estimate, contact_force
         ctx.others, ctx.navigating = list(others), navigating
         if plan is not None:
-            ctx.plan = plan
+            ctx.plan, ctx.reversing = plan, reversing
         ctx.finding = None
         self.tree.tick()
         ctx.held = ctx.decision
@@ -304,6 +305,7 @@ class SafetyLayer:
                 others=others,
                 plan=world.plans.get(ns),
                 navigating=world.navigating.get(ns, False),
+                reversing=world.reversing.get(ns, False),
             )
             self.monitors[ns] = monitor(tree.ctx)
             self.decisions[ns] = decision
