@@ -40,7 +40,7 @@ class FleetConfig:
     reverse_ratio: float = 0.0  # planned reversing speed / speed_mps (0: never reverse; opt-in)
     shelters: bool = False  # a robot in another's way goes to a shelter first (opt-in, docs/fleet.md)
     # (both off by default: in the closed loop a reversing truck swung its tail into a shelf, and
-    # robots went back and forth between shelter and goal: docs/fleet.md, Reversing and shelters)
+    # with shelters the fleet stood still: docs/fleet.md, Reversing and shelters)
 
     def __post_init__(self) -> None:
         _within("spacing_m", self.spacing_m, 0.2, 5.0, "m", 1.0)
