@@ -6,9 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from shapely.geometry import box
 
-from simlan_data.algorithms.coordinator import Intent
+from simlan_data.algorithms.coordinator import Intent, footprint_polygon
 from simlan_data.algorithms.fleet import FleetConfig, FleetCoordinator, build_route_graph
+from simlan_data.algorithms.fleet.footprint import Shape
+from simlan_data.algorithms.fleet.schedule import Request, Reservations, Timing
+from simlan_data.algorithms.fleet.search import Search
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_world
 from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.errors import ConfigError
@@ -199,6 +203,37 @@ def test_two_trucks_head_on_in_a_lane_too_narrow_to_turn_one_backs_out_and_lets_
         stuck = KinematicFleet(FleetCoordinator(off, CoordinatorContext(SAFETY_M, grid)), robots)
         stuck.run(120)
         assert not stuck.done("a") and not stuck.done("b")
+
+
+def test_a_truck_backing_to_a_dead_end_keeps_its_tail_off_the_wall() -> None:
+    # a lane too narrow to turn in, closed at its east end; the truck faces west, its goal 1.5 m
+    # from the wall. Reversing there its tail (1.15 m behind base_link) would lead into the wall:
+    # the lane's edges are clear for its width, not for its length past the last node (a truck
+    # backed into a shelf so in the closed loop). It reverses only where its tail stays clear:
+    # here it drives out west, turns on the open floor and comes back forwards
+    grid = grid_from_boxes((32, 10), [(5, 0, 27, 4.2), (5, 5.8, 27, 10), (27, 0, 32, 10)])
+    coordinator = FleetCoordinator(FleetConfig(reverse_ratio=0.5), CoordinatorContext(SAFETY_M, grid))
+    fleet = KinematicFleet(coordinator, {"t": ((15, 5.0, np.pi), [(25.5, 5)], TRUCK)})
+    fleet.run(200)
+    assert fleet.done("t")
+    trace = np.array([snap["t"] for snap in fleet.trace])
+    step = np.diff(trace[:, :2], axis=0)
+    backwards = step[:, 0] * np.cos(trace[1:, 2]) + step[:, 1] * np.sin(trace[1:, 2]) < -1e-6
+    wall = box(27, 0, 32, 10)
+    assert all(footprint_polygon(tuple(p), TRUCK).distance(wall) > 0.3 for p in trace[1:][backwards])
+    # the check itself: reversing along the lane is clear, onto the node before the wall is not
+    graph = coordinator.graph
+    assert graph is not None
+    last, middle = graph.nearest((26.0, 5.0), within_m=1.0), graph.nearest((15.0, 5.0), within_m=1.0)
+    assert last is not None and middle is not None
+    timing = Timing(1.0, 45, SAFETY_M, reverse_ratio=0.5)
+    shape = Shape.of(TRUCK, tolerance_m=0.15)
+    request = Request("t", middle, last, shape, (15.0, 5.0), np.pi)
+    search = Search(graph, request, Reservations(graph, timing.horizon, timing.safety_m), timing)
+    before = next(u for u in graph.neighbours[last] if graph.xy[u][0] < graph.xy[last][0] - 0.5)
+    beside = next(u for u in graph.neighbours[middle] if graph.xy[u][0] > graph.xy[middle][0] + 0.5)
+    assert not search.back_clear[graph.arc_index[(before, last)]]
+    assert search.back_clear[graph.arc_index[(middle, beside)]]
 
 
 def test_idle_robot_in_a_single_lane_moves_aside_and_comes_back() -> None:

@@ -39,8 +39,8 @@ class FleetConfig:
     unseen_cost: float = 25.0  # camera steering: route guide's extra length per metre no camera sees (0: off)
     reverse_ratio: float = 0.0  # planned reversing speed / speed_mps (0: never reverse; opt-in)
     shelters: bool = False  # a robot in another's way goes to a shelter first (opt-in, docs/fleet.md)
-    # (both off by default: in the closed loop a reversing truck swung its tail into a shelf, and
-    # with shelters the fleet stood still: docs/fleet.md, Reversing and shelters)
+    # (both off by default: in the closed loop they reached fewer goals than without, and a
+    # reversing truck backed into a shelf before its tail was checked: docs/fleet.md)
 
     def __post_init__(self) -> None:
         _within("spacing_m", self.spacing_m, 0.2, 5.0, "m", 1.0)

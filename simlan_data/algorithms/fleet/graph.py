@@ -48,6 +48,7 @@ class RouteGraph:
     arc_bias: NDArray[np.float64] | None = None
     # (N,) where a robot may turn in place as far as the cameras go: seen at every heading (None: all)
     seen_node: NDArray[np.bool_] | None = None
+    grid: OccupancyGrid | None = None  # the floor it was built on (checks beyond the lanes' width)
 
     @property
     def size(self) -> int:
@@ -124,6 +125,32 @@ class RouteGraph:
     @cached_property
     def _turn_graphs(self) -> dict[tuple[float, float], TurnGraph]:
         return {}
+
+    @cached_property
+    def _floor_clearance(self) -> NDArray[np.float32] | None:
+        return None if self.grid is None else self.grid.clearance_m()
+
+    def capsules_clear(
+        self, p: NDArray[np.float64], q: NDArray[np.float64], radius_m: float, step_m: float = 0.1
+    ) -> NDArray[np.bool_]:
+        """Whether each segment p[i]q[i] grown by ``radius_m`` keeps off every obstacle of the
+        floor (sampled every ``step_m``; True everywhere without a grid). Edges keep the lane's
+        width clear; a robot's length past a node (its tail reversing) is checked here."""
+        field = self._floor_clearance
+        if field is None or not len(p):
+            return np.ones(len(p), dtype=bool)
+        assert self.grid is not None
+        n = max(2, int(np.ceil(np.max(np.linalg.norm(q - p, axis=1)) / step_m)) + 1)
+        t = np.linspace(0.0, 1.0, n)
+        pts = p[:, None, :] + t[None, :, None] * (q - p)[:, None, :]
+        g = self.grid
+        col = np.floor((pts[..., 0] - g.origin_xy_m[0]) / g.resolution_m).astype(np.int64)
+        row = np.floor((pts[..., 1] - g.origin_xy_m[1]) / g.resolution_m).astype(np.int64)
+        inside = (row >= 0) & (row < field.shape[0]) & (col >= 0) & (col < field.shape[1])
+        clear = np.where(
+            inside, field[np.clip(row, 0, field.shape[0] - 1), np.clip(col, 0, field.shape[1] - 1)], 0.0
+        )
+        return np.asarray((clear >= radius_m - 0.5 * g.resolution_m).all(axis=1))
 
     def turns(self, reach_m: float, tolerance_rad: float) -> TurnGraph:
         """The forward-only moves of a robot of reach ``reach_m`` (built once per reach)."""
@@ -210,7 +237,7 @@ def build_route_graph(
     if seen is not None and unseen_cost > 0 and len(edges):
         bias = 1.0 + unseen_cost * _unseen_share(grid, xy, edges, seen)
         seen_node = np.asarray(seen[:, cell_r, cell_c].all(axis=0))
-    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node)
+    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node, grid)
 
 
 def _unseen_share(

@@ -73,8 +73,20 @@ class Search:
         self._always = [(1, timing.horizon)]
         self.target = -1
         self.reversing = timing.reverse_ratio > 0.0  # it may drive an arc backwards
+        # per arc: reversing along it keeps the robot's tail, which leads, off the shelves (the
+        # graph keeps a lane's width clear, not a truck's 1.15 m past the node it backs to)
+        self.back_clear: list[bool] = self._back_clear() if self.reversing else []
 
     # ------------------------------------------------------------------ geometry
+    def _back_clear(self) -> list[bool]:
+        arcs, xy, shape = self.graph.arcs, self.graph.xy, self.r.shape
+        a, b = xy[arcs[:, 0]], xy[arcs[:, 1]]
+        d = b - a
+        d = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
+        back = shape.reversed()
+        ok = self.graph.capsules_clear(a + back.back_m * d, b + back.front_m * d, shape.half_width_m)
+        return cast(list[bool], ok.tolist())
+
     def heading(self, node: int, prev: int, back: bool = False) -> float | None:
         """Where the robot faces at ``node`` having come from ``prev`` (``back``: reversing)."""
         if prev == START:
@@ -276,7 +288,11 @@ class Search:
             ways = []  # (reversing, steps)
             if free or length <= 1e-9 or within(cast(float, heading), angle):
                 ways.append((False, steps(length)))
-            elif self.reversing and within(cast(float, heading), angle + math.pi):
+            elif (
+                self.reversing
+                and within(cast(float, heading), angle + math.pi)
+                and self._may_back(u, v, prev)
+            ):
                 ways.append((True, steps(length / self.timing.reverse_ratio)))
             for back2, s in ways:
                 for turn2 in (False, True) if turnable[v] else (False,):
@@ -285,6 +301,14 @@ class Search:
                     if math.isfinite(h2) and (exits is None or math.isfinite(self._h(exits, place2))):
                         out.append((place2, s, h2))
         return out
+
+    def _may_back(self, u: int, v: int, prev: int) -> bool:
+        """Whether reversing from ``u`` (from the start pose where ``prev`` is START) to ``v``
+        keeps the tail off the shelves."""
+        if prev != START:
+            return self.back_clear[self.graph.arc_index[(u, v)]]
+        p, q, _ = fp.drive(self.r.shape.reversed(), self.start_xy, self.graph.xy[v])
+        return bool(self.graph.capsules_clear(p, q, self.r.shape.half_width_m)[0])
 
     def _intervals(self, place: Place) -> list[tuple[int, int]]:
         """Maximal runs of steps (first, last; within 1..horizon) in which what the robot holds at
