@@ -91,7 +91,6 @@ class FleetCoordinator:
         self._robots: dict[str, _Robot] = {}
         self.waits: dict[str, int] = {}  # ticks spent waiting, per robot (as the gpss coordinator)
         self._force_replan = False
-        self._clearance: NDArray[np.float32] | None = None
         self._standstill_ns = 0  # the last standstill of the fleet (deadlock_after_s counts from it)
 
     # ------------------------------------------------------------------ the role's method
@@ -226,7 +225,7 @@ class FleetCoordinator:
                     xy,
                     i.pose_xyyaw[2],
                     goal_xy=i.goal_xy,
-                    start_turnable=self._clearance_at(xy) >= shape.reach_m,
+                    start_turnable=graph.floor_clearance_at(xy) >= shape.reach_m,
                     idle=i.priority >= IDLE_PRIORITY,
                 )
             )
@@ -274,14 +273,6 @@ class FleetCoordinator:
         """Something not in the plan: its footprint where it stands (grown by the tracking error)."""
         shape = self._shape(intent)
         return Obstacle(intent.pose_xyyaw[:2], shape.reach_m, intent.pose_xyyaw[2], shape)
-
-    def _clearance_at(self, xy: tuple[float, float]) -> float:
-        cell = self.grid.to_cell(xy)
-        if not self.grid.inside(cell):
-            return 0.0
-        if self._clearance is None:
-            self._clearance = self.grid.clearance_m()
-        return float(self._clearance[cell])
 
     def _path(
         self, graph: RouteGraph, route: Route, intent: Intent, turns_last: bool

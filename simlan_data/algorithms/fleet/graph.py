@@ -30,6 +30,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from simlan_data.algorithms.fleet.footprint import Shape
 from simlan_data.algorithms.fleet.turns import TurnGraph
 from simlan_data.algorithms.occupancy import OccupancyGrid
 
@@ -49,6 +50,7 @@ class RouteGraph:
     # (N,) where a robot may turn in place as far as the cameras go: seen at every heading (None: all)
     seen_node: NDArray[np.bool_] | None = None
     grid: OccupancyGrid | None = None  # the floor it was built on (checks beyond the lanes' width)
+    floor_clearance_m: NDArray[np.float64] | None = None  # per cell of ``grid``: to the nearest obstacle
 
     @property
     def size(self) -> int:
@@ -127,30 +129,43 @@ class RouteGraph:
         return {}
 
     @cached_property
-    def _floor_clearance(self) -> NDArray[np.float32] | None:
-        return None if self.grid is None else self.grid.clearance_m()
+    def _reversing_clear(self) -> dict[Shape, list[bool]]:
+        return {}
+
+    def floor_clearance_at(self, xy: tuple[float, float]) -> float:
+        """Distance from ``xy`` to the nearest obstacle of the floor (0 off it or without a grid)."""
+        if self.grid is None or self.floor_clearance_m is None:
+            return 0.0
+        cell = self.grid.to_cell(xy)
+        return float(self.floor_clearance_m[cell]) if self.grid.inside(cell) else 0.0
 
     def capsules_clear(
-        self, p: NDArray[np.float64], q: NDArray[np.float64], radius_m: float, step_m: float = 0.1
+        self, p: NDArray[np.float64], q: NDArray[np.float64], radius_m: float
     ) -> NDArray[np.bool_]:
         """Whether each segment p[i]q[i] grown by ``radius_m`` keeps off every obstacle of the
-        floor (sampled every ``step_m``; True everywhere without a grid). Edges keep the lane's
+        floor (sampled every half cell; True everywhere without a grid). Edges keep the lane's
         width clear; a robot's length past a node (its tail reversing) is checked here."""
-        field = self._floor_clearance
-        if field is None or not len(p):
+        field = self.floor_clearance_m
+        if self.grid is None or field is None or not len(p):
             return np.ones(len(p), dtype=bool)
-        assert self.grid is not None
-        n = max(2, int(np.ceil(np.max(np.linalg.norm(q - p, axis=1)) / step_m)) + 1)
-        t = np.linspace(0.0, 1.0, n)
-        pts = p[:, None, :] + t[None, :, None] * (q - p)[:, None, :]
-        g = self.grid
-        col = np.floor((pts[..., 0] - g.origin_xy_m[0]) / g.resolution_m).astype(np.int64)
-        row = np.floor((pts[..., 1] - g.origin_xy_m[1]) / g.resolution_m).astype(np.int64)
-        inside = (row >= 0) & (row < field.shape[0]) & (col >= 0) & (col < field.shape[1])
+        rows, cols = _samples(self.grid, p, q)
+        inside = (rows >= 0) & (rows < field.shape[0]) & (cols >= 0) & (cols < field.shape[1])
         clear = np.where(
-            inside, field[np.clip(row, 0, field.shape[0] - 1), np.clip(col, 0, field.shape[1] - 1)], 0.0
+            inside, field[rows.clip(0, field.shape[0] - 1), cols.clip(0, field.shape[1] - 1)], 0.0
         )
-        return np.asarray((clear >= radius_m - 0.5 * g.resolution_m).all(axis=1))
+        return np.asarray((clear >= radius_m - 0.5 * self.grid.resolution_m).all(axis=1))
+
+    def reversing_clear(self, shape: Shape) -> list[bool]:
+        """Per arc: whether a robot of ``shape`` reversing along it keeps its tail, which leads,
+        off the floor's obstacles (built once per shape)."""
+        if shape not in self._reversing_clear:
+            a, b = self.xy[self.arcs[:, 0]], self.xy[self.arcs[:, 1]]
+            d = b - a
+            d = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
+            back = shape.reversed()
+            ok = self.capsules_clear(a + back.back_m * d, b + back.front_m * d, shape.half_width_m)
+            self._reversing_clear[shape] = ok.tolist()
+        return self._reversing_clear[shape]
 
     def turns(self, reach_m: float, tolerance_rad: float) -> TurnGraph:
         """The forward-only moves of a robot of reach ``reach_m`` (built once per reach)."""
@@ -237,7 +252,7 @@ def build_route_graph(
     if seen is not None and unseen_cost > 0 and len(edges):
         bias = 1.0 + unseen_cost * _unseen_share(grid, xy, edges, seen)
         seen_node = np.asarray(seen[:, cell_r, cell_c].all(axis=0))
-    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node, grid)
+    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node, grid, clearance)
 
 
 def _unseen_share(

@@ -75,17 +75,10 @@ class Search:
         self.reversing = timing.reverse_ratio > 0.0  # it may drive an arc backwards
         # per arc: reversing along it keeps the robot's tail, which leads, off the shelves (the
         # graph keeps a lane's width clear, not a truck's 1.15 m past the node it backs to)
-        self.back_clear: list[bool] = self._back_clear() if self.reversing else []
+        # (shared by every search of this shape on the graph)
+        self.back_clear: list[bool] = graph.reversing_clear(r.shape) if self.reversing else []
 
     # ------------------------------------------------------------------ geometry
-    def _back_clear(self) -> list[bool]:
-        arcs, xy, shape = self.graph.arcs, self.graph.xy, self.r.shape
-        a, b = xy[arcs[:, 0]], xy[arcs[:, 1]]
-        d = b - a
-        d = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
-        back = shape.reversed()
-        ok = self.graph.capsules_clear(a + back.back_m * d, b + back.front_m * d, shape.half_width_m)
-        return cast(list[bool], ok.tolist())
 
     def heading(self, node: int, prev: int, back: bool = False) -> float | None:
         """Where the robot faces at ``node`` having come from ``prev`` (``back``: reversing)."""
