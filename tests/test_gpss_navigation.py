@@ -120,6 +120,33 @@ def test_pure_pursuit_reverses_the_segments_marked_backwards_and_stops_at_each_c
         PathFollower(path, PursuitParams(), (True,))
 
 
+def _turn_spots(stops: tuple[int, ...] | None) -> np.ndarray:
+    """Where a unicycle following a hairpin (east 6 m, then back west-north-west) turns on the spot."""
+    path = np.array([[0.0, 0.0], [6.0, 0.0], [0.0, 1.5]])
+    follower = PathFollower(path, PursuitParams(max_speed_mps=1.0, goal_tolerance_m=0.2), stops=stops)
+    x, y, yaw, dt = 0.0, 0.0, 0.0, 0.05
+    spots = []
+    for _ in range(int(60 / dt)):
+        v, w = follower.step(x, y, yaw, dt)
+        if v == 0.0 and abs(w) > 1e-6:
+            spots.append((x, y))
+        x, y, yaw = x + v * np.cos(yaw) * dt, y + v * np.sin(yaw) * dt, yaw + w * dt
+        if follower.done:
+            break
+    assert follower.done and np.hypot(x, y - 1.5) < 0.2
+    return np.array(spots)
+
+
+def test_pure_pursuit_turns_on_the_spot_only_at_the_vertices_it_is_told_to_stop_at() -> None:
+    # a fleet plan turns a robot on the spot at a vertex and reserves the turn's circle there only
+    planned = _turn_spots((1,))
+    assert len(planned) and np.hypot(planned[:, 0] - 6.0, planned[:, 1]).max() < 0.25
+    # pursued across the corner, the robot starts turning a lookahead before it (the collision
+    # of a pallet truck with a shelf end, docs/fleet.md)
+    pursued = _turn_spots(None)
+    assert len(pursued) and np.hypot(pursued[:, 0] - 6.0, pursued[:, 1]).max() > 0.4
+
+
 def test_coordinator_lets_the_first_robot_on_and_holds_the_one_that_would_cut_it_off() -> None:
     truck = AGENT_TYPES["pallet_truck"].footprint_m
     east = Intent("robot_agent_1", 1, (0.0, 0.0, 0.0), truck, np.array([[0.0, 0.0], [6.0, 0.0]]))

@@ -101,6 +101,9 @@ class Decision:
     # per segment of path_xy: driven backwards (None: every segment forwards). A robot reverses
     # out of a corridor or a dead end where it cannot turn (the fleet coordinator's plans)
     path_reverse: tuple[bool, ...] | None = None
+    # vertices of path_xy where the robot stops and turns on the spot (a fleet plan reserves a
+    # turn's swept circle there only): it drives to the vertex before it turns (None: none)
+    path_stops: tuple[int, ...] | None = None
     # held at speed 0, may it still turn in place towards its path? (False: its whole footprint
     # stands still; a fleet plan reserves a turn's swept circle only where it plans the turn)
     turn_in_place: bool = True

@@ -130,11 +130,18 @@ class PathFollower:
     into sections where the direction changes; the robot drives each section to its end, stops
     there and drives the next. Backwards it pursues the path with its tail (the mirrored unicycle:
     heading + pi, the linear speed negated). A path that turns back on itself at a cusp is thus
-    never projected onto the wrong part.
+    never projected onto the wrong part. ``stops`` (vertex indices, optional): sections end there
+    too, so the robot reaches such a vertex before it turns towards the next section (a fleet
+    plan's turn on the spot; pursued across the corner, it turned before the vertex, where the
+    plan had reserved no turn, and swept into a shelf).
     """
 
     def __init__(
-        self, path_xy: NDArray[np.float64], params: PursuitParams, reverse: Sequence[bool] | None = None
+        self,
+        path_xy: NDArray[np.float64],
+        params: PursuitParams,
+        reverse: Sequence[bool] | None = None,
+        stops: Sequence[int] | None = None,
     ) -> None:
         self.path = np.asarray(path_xy, dtype=float).reshape(-1, 2)
         self.params = params
@@ -145,6 +152,7 @@ class PathFollower:
         self.reverse = tuple(bool(b) for b in reverse) if reverse is not None else None
         if self.reverse is not None and len(self.reverse) != len(self._seg_len):
             raise ValueError(f"reverse has {len(self.reverse)} flags for {len(self._seg_len)} segments")
+        self.stops = tuple(sorted(int(k) for k in stops)) if stops else None
         self._ends, self._backs = self._sections()
         self.section = 0  # the section driven now
         self._progress_m = 0.0
@@ -153,14 +161,16 @@ class PathFollower:
         self.done = self.length_m < 1e-6
 
     def _sections(self) -> tuple[list[float], list[bool]]:
-        """Arc length at the end of each section (a run of segments driven one way) and its way."""
-        if self.reverse is None or not any(self.reverse):
-            return [self.length_m], [False]
-        ends, backs = [], [self.reverse[0]]
-        for i in range(1, len(self.reverse)):
-            if self.reverse[i] != self.reverse[i - 1]:
+        """Arc length at the end of each section (a run of segments driven one way, up to a stop)
+        and its way."""
+        n = len(self._seg_len)
+        way = self.reverse if self.reverse is not None else (False,) * n
+        stops = set(self.stops or ())
+        ends, backs = [], [bool(way[0])] if n else [False]
+        for i in range(1, n):
+            if way[i] != way[i - 1] or i in stops:
                 ends.append(float(self._cum[i]))
-                backs.append(self.reverse[i])
+                backs.append(bool(way[i]))
         ends.append(self.length_m)
         return ends, backs
 

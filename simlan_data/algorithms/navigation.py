@@ -134,31 +134,37 @@ class Navigator:
 
     def _adopt(self, plan: Plan) -> None:
         self.plan = plan
-        self.follower = PathFollower(plan.points_xy, self.pursuit, plan.reverse)
+        self.follower = PathFollower(plan.points_xy, self.pursuit, plan.reverse, plan.stops)
         self.status.plans += 1
         if self._goal_first_plan:
             self.status.planned_length_m += plan.length_m
             self._goal_first_plan = False
         self.new_plan = True
 
-    def move_aside(self, path_xy: NDArray[np.float64], reverse: tuple[bool, ...] | None = None) -> None:
+    def move_aside(
+        self,
+        path_xy: NDArray[np.float64],
+        reverse: tuple[bool, ...] | None = None,
+        stops: tuple[int, ...] | None = None,
+    ) -> None:
         """With every goal done, drive ``path_xy`` (a fleet coordinator moves an idle robot out of
-        the others' way; ``reverse``: its segments driven backwards); it counts as no goal. A path
-        equal to the one driven is kept."""
+        the others' way; ``reverse``: its segments driven backwards; ``stops``: vertices where it
+        turns on the spot); it counts as no goal. A path equal to the one driven is kept."""
         if self.goal is not None or (
             self.aside is not None
             and np.array_equal(self.aside.path, path_xy)
             and self.aside.reverse == (tuple(reverse) if reverse is not None else None)
+            and self.aside.stops == (tuple(sorted(stops)) if stops else None)
         ):
             return
-        self.aside = PathFollower(path_xy, self.pursuit, reverse)
+        self.aside = PathFollower(path_xy, self.pursuit, reverse, stops)
 
     def ahead(self) -> tuple[NDArray[np.float64] | None, bool]:
         """The path ahead as the safety layer reads it, and whether it is driven backwards: the
         plan, or for a route with reversing the rest of the part driven now (a route that turns
         back on itself is not projected onto the wrong part)."""
         follower = self.follower if self.goal is not None else self.aside
-        if follower is None or follower.reverse is None:
+        if follower is None or (follower.reverse is None and follower.stops is None):
             return (self.plan.points_xy if self.plan is not None else None), False
         return follower.ahead_xy(), follower.reversing
 

@@ -45,6 +45,7 @@ class Plan:
     length_m: float
     expanded: int
     reverse: tuple[bool, ...] | None = None  # per segment: driven backwards (a fleet plan's route)
+    stops: tuple[int, ...] | None = None  # vertices where it stops to turn on the spot (a fleet plan's)
 
 
 class GridPlanner:

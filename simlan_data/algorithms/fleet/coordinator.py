@@ -48,6 +48,7 @@ class _Robot:
     park: tuple[float, float] | None = None  # idle (every goal done): where it stands when not in the way
     path_xy: NDArray[np.float64] | None = None
     path_reverse: tuple[bool, ...] | None = None  # per segment of path_xy: driven backwards
+    path_stops: tuple[int, ...] | None = None  # vertices of path_xy where it turns on the spot
     moved_at_ns: int = 0
     moved_from: tuple[float, float] = (0.0, 0.0)
     waiting_since_ns: int | None = None
@@ -251,9 +252,9 @@ class FleetCoordinator:
                 # planned last and moves aside when a robot with a goal needs the place
                 r.park = (float(i.pose_xyyaw[0]), float(i.pose_xyyaw[1]))
             if route is None:
-                r.path_xy, r.path_reverse = None, None
+                r.path_xy, r.path_reverse, r.path_stops = None, None, None
             else:
-                r.path_xy, r.path_reverse = self._path(
+                r.path_xy, r.path_reverse, r.path_stops = self._path(
                     graph, route, i, plan.plans[i.namespace].vertices[-1].turn
                 )
 
@@ -276,23 +277,29 @@ class FleetCoordinator:
 
     def _path(
         self, graph: RouteGraph, route: Route, intent: Intent, turns_last: bool
-    ) -> tuple[NDArray[np.float64], tuple[bool, ...] | None]:
+    ) -> tuple[NDArray[np.float64], tuple[bool, ...] | None, tuple[int, ...] | None]:
         """The path the navigator follows: from the robot through the route's vertices to its goal,
-        and per segment whether it is driven backwards (None: none is). The way from the last
+        per segment whether it is driven backwards (None: none is), and the path's vertices where
+        the plan turns it on the spot (None: nowhere after the start). The way from the last
         vertex to the goal is driven as the robot arrived there, unless it turns there."""
         pts = [np.asarray(intent.pose_xyyaw[:2], dtype=float)] + [graph.xy[n] for n in route.nodes[1:]]
         backs = list(route.backs[1:])
+        turns = list(route.turns[1:]) if route.turns else [False] * len(backs)
         if intent.goal_xy is not None:
             pts.append(np.asarray(intent.goal_xy, dtype=float))
             backs.append(bool(route.backs[-1]) and not turns_last)
-        keep, flags = [pts[0]], []
-        for a, p, back in zip(pts, pts[1:], backs):
+            turns.append(False)
+        keep, flags, stops = [pts[0]], [], []
+        for a, p, back, turn in zip(pts, pts[1:], backs, turns):
             if np.linalg.norm(p - a) > 1e-6:
                 keep.append(p)
                 flags.append(back)
+            if turn:
+                stops.append(len(keep) - 1)  # it turns where it stands after this vertex
+        stops = [k for k in stops if 0 < k < len(keep) - 1]
         if len(keep) < 2:
-            return np.asarray([pts[0], pts[0]]), None
-        return np.asarray(keep), (tuple(flags) if any(flags) else None)
+            return np.asarray([pts[0], pts[0]]), None, None
+        return np.asarray(keep), (tuple(flags) if any(flags) else None), (tuple(stops) or None)
 
     def _decisions(
         self, t_ns: int, graph: RouteGraph, movers: list[Intent], intents: list[Intent]
@@ -332,6 +339,7 @@ class FleetCoordinator:
                 path_xy=r.path_xy,
                 turn_in_place=limit != 0.0,
                 path_reverse=r.path_reverse,
+                path_stops=r.path_stops,
             )
         self._check_deadlock(t_ns, waits, movers)
         return out

@@ -36,6 +36,7 @@ class Route:
     progress: int = 0  # the last vertex it has reached
     deps: list[list[tuple[str, int]]] | None = None  # per vertex: (robot, vertex) it must wait for
     backs: list[bool] = field(default_factory=list)  # per vertex: it drives there reversing
+    turns: list[bool] = field(default_factory=list)  # per vertex: it turns on the spot there
 
     @classmethod
     def from_plan(cls, plan: RobotPlan, rank: int) -> Route:
@@ -49,6 +50,7 @@ class Route:
             [v.loose for v in vs],
             rank,
             backs=[v.back for v in vs],
+            turns=[v.turn for v in vs],
         )
 
     def acquire(self, m: int) -> float:

@@ -99,6 +99,9 @@ class Timing:
     horizon: int  # steps
     safety_m: float  # distance kept between two robots' regions
     turn_tolerance_rad: float = math.radians(50.0)  # larger heading changes need a turn in place
+    # where a robot changes between driving forwards and backwards it stands: a larger heading
+    # change there is a turn on the spot (the path follower's), which the plan has not reserved
+    cusp_tolerance_rad: float = math.radians(20.0)
     # planned reversing speed as a share of the forward speed (an arc driven backwards takes
     # 1 / reverse_ratio as many steps); 0: it never reverses
     reverse_ratio: float = 0.0

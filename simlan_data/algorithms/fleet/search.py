@@ -166,7 +166,7 @@ class Search:
         best = math.inf
         for v, length, angle in self._arcs(r.start, START):
             if r.heading_rad is not None and length > 1e-9 and not self.turns.within(r.heading_rad, angle):
-                if self.reversing and self.turns.within(r.heading_rad, angle + math.pi):
+                if self.reversing and _off(r.heading_rad, angle + math.pi) <= self.timing.cusp_tolerance_rad:
                     best = min(best, length + to.facing(v, angle + math.pi))
                 continue
             rest = to.facing(v, angle) if v == r.start else to.arc[self.graph.arc_index[(r.start, v)]]
@@ -274,16 +274,19 @@ class Search:
         u, prev, turn, back = place
         heading = self.heading(u, prev, back)
         came = FROM_START if prev == START else u
-        steps, turnable, within = self.timing.steps, self.turnable, self.turns.within
+        steps, turnable = self.timing.steps, self.turnable
         free = heading is None or turn  # it may leave in any direction (forwards)
+        # a change of direction (a cusp; leaving the start backwards) only nearly in line
+        turn_tol, cusp_tol = self.timing.turn_tolerance_rad, self.timing.cusp_tolerance_rad
+        ahead_tol, back_tol = (cusp_tol, turn_tol) if back else (turn_tol, cusp_tol)
         out = []
         for v, length, angle in self._arcs(u, prev):
             ways = []  # (reversing, steps)
-            if free or length <= 1e-9 or within(cast(float, heading), angle):
+            if free or length <= 1e-9 or _off(cast(float, heading), angle) <= ahead_tol:
                 ways.append((False, steps(length)))
             elif (
                 self.reversing
-                and within(cast(float, heading), angle + math.pi)
+                and _off(cast(float, heading), angle + math.pi) <= back_tol
                 and self._may_back(u, v, prev)
             ):
                 ways.append((True, steps(length / self.timing.reverse_ratio)))
@@ -403,3 +406,8 @@ class Search:
             d = self.graph.xy[v] - here
             out.append((v, float(np.hypot(*d)), float(np.arctan2(d[1], d[0]))))
         return out
+
+
+def _off(heading: float, angle: float) -> float:
+    """How far ``angle`` lies from ``heading`` (radians, 0..pi)."""
+    return abs((angle - heading + math.pi) % (2 * math.pi) - math.pi)
