@@ -92,6 +92,27 @@ def test_a_robot_released_after_a_stall_does_not_drive_at_another() -> None:
     assert not coordinator._closing_in(truck, [truck, far])
 
 
+def test_a_robot_turning_on_the_spot_is_moving_and_a_windowed_route_ends_at_its_window() -> None:
+    grid = grid_from_boxes((60, 8), [])
+    # a 20 s window (10 steps of 1 m): the goal lies 40 m away
+    coordinator = FleetCoordinator(FleetConfig(horizon_s=20.0), CoordinatorContext(SAFETY_M, grid))
+    intents = [Intent("a", 1, (5.0, 4.0, 0.0), TRUCK, goal_xy=(45.0, 4.0))]
+    path = coordinator.decide(0, intents)["a"].path_xy
+    assert path is not None and path[-1][0] < 20.0  # not on to the goal: a straight line from the
+    # window's end to the goal crosses whatever lies between (shelves), and the follower's
+    # lookahead turned robots towards it
+    # allowed to drive, it turns on the spot for 6 s (a planned turn takes about 4 s for a truck):
+    # it is not stopped (before, only a change of position counted, and every planned turn made
+    # the robot an obstacle to plan around)
+    for k in range(1, 61):
+        yaw = min(np.pi, 0.06 * k)
+        coordinator.decide(round(k * 0.1e9), [Intent("a", 1, (5.0, 4.0, yaw), TRUCK, goal_xy=(45.0, 4.0))])
+    assert coordinator.state.stops == 0
+    for k in range(61, 120):  # then it stands: stopped after stall_s
+        coordinator.decide(round(k * 0.1e9), [Intent("a", 1, (5.0, 4.0, np.pi), TRUCK, goal_xy=(45.0, 4.0))])
+    assert coordinator.state.stops == 1
+
+
 def test_two_pallet_trucks_pass_side_by_side_in_a_wide_aisle() -> None:
     # a 20 m aisle 4.8 m wide, as the shipped main aisle: two lanes for trucks 0.8 m wide, not for
     # their 1.22 m turning circles (swept circles: neither got through)
@@ -142,6 +163,30 @@ def test_robot_stopped_in_an_aisle_is_routed_around() -> None:
     assert fleet.coordinator.state.stops >= 1  # x was allowed to drive, did not: planned around
     assert fleet.path("a")[:, 1].max() > 6.8  # it took the upper aisle
     assert fleet.min_gap_m() >= SAFETY_M
+
+
+def test_with_unseen_limit_a_robot_keeps_to_the_floor_the_cameras_see() -> None:
+    # the same two aisles; no camera sees the lower (short) one, facing east: a robot steering on
+    # the cameras would be stopped there, lost. The guide is left unbiased (unseen_cost=0), so only
+    # the limit keeps it off
+    grid = grid_from_boxes((20, 10), [(5, 3.2, 15, 6.8), (5, 0, 15, 1.0), (5, 9.0, 15, 10)])
+    seen = np.ones((8, *grid.shape), bool)
+    seen[0, : round(3.2 / RES), round(6 / RES) : round(14 / RES)] = False  # heading 0 (east), lower aisle
+    robots = {"a": ((2, 2.1, 0.0), [(18, 2.1)], JACKAL)}
+
+    def upper_share(**config: float) -> float:
+        coordinator = FleetCoordinator(
+            FleetConfig(unseen_cost=0.0, **config), CoordinatorContext(SAFETY_M, grid, seen)
+        )
+        fleet = KinematicFleet(coordinator, robots)
+        fleet.run(150)
+        assert fleet.done("a")
+        return float((fleet.path("a")[:, 1] > 6.8).mean())
+
+    assert upper_share() == 0.0  # no limit: the short way, unseen
+    assert upper_share(unseen_limit=0.5) > 0.2  # the limit: round by the upper aisle
+    with pytest.raises(ConfigError, match="unseen_limit"):
+        FleetConfig(unseen_limit=1.5)
 
 
 def test_a_robot_facing_away_from_its_goal_in_a_lane_too_narrow_to_turn_drives_round() -> None:

@@ -14,7 +14,7 @@ from simlan_data.algorithms.dryrun import dry_run
 from simlan_data.algorithms.follower import PathFollower, PursuitParams
 from simlan_data.algorithms.navigation import Navigator
 from simlan_data.algorithms.occupancy import OccupancyGrid, grid_from_nav2_map
-from simlan_data.algorithms.planner import GridPlanner, PlanningError
+from simlan_data.algorithms.planner import GridPlanner, Plan, PlanningError
 from simlan_data.algorithms.stack import AgentPlan, NavigationParams
 from simlan_data.config.validation import to_config
 from simlan_data.constants import MAPS_DIR
@@ -226,6 +226,26 @@ def test_simlan_nav2_map_loads_and_plans_the_main_aisle() -> None:
     assert grid.occupied.mean() < 0.9
     plan = GridPlanner(grid, radius_m=0.8).plan((-10.0, 0.4), (20.0, 0.4))
     assert plan.length_m < 32.0
+
+
+def test_a_navigator_waits_at_the_end_of_a_coordinator_route_that_stops_short_of_its_goal() -> None:
+    # a fleet coordinator's windowed or queued route ends before the goal: done with it, the robot
+    # stands there, waiting for the next, and counts no goal
+    grid = _room_with_wall()
+    nav = Navigator(
+        "robot_agent_1", [(3.5, 1.5)], GridPlanner(grid, radius_m=0.4), PursuitParams(max_speed_mps=1.0)
+    )
+    nav.adopt(Plan(np.array([[1.5, 1.5], [2.5, 1.5]]), 1.0, 0))
+    x, y, yaw, dt = 1.5, 1.5, 0.0, 0.05
+    for _ in range(200):
+        v, w = nav.step((x, y, yaw), dt)
+        x, y, yaw = x + v * np.cos(yaw) * dt, y + v * np.sin(yaw) * dt, yaw + w * dt
+    assert abs(x - 2.5) < 0.35 and nav.status.goals_reached == 0 and nav.status.state == "waiting"
+    nav.adopt(Plan(np.array([[x, y], [3.5, 1.5]]), 1.0, 0))  # the next window: to the goal
+    for _ in range(200):
+        v, w = nav.step((x, y, yaw), dt)
+        x, y, yaw = x + v * np.cos(yaw) * dt, y + v * np.sin(yaw) * dt, yaw + w * dt
+    assert nav.status.goals_reached == 1
 
 
 def test_a_navigator_with_every_goal_done_drives_only_the_way_aside_it_is_given() -> None:

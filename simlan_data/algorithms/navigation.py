@@ -259,12 +259,25 @@ class Navigator:
         assert self.follower is not None
         v, w = _held(decision, *self.follower.step(x, y, yaw, dt_s, speed_limit_mps=limit))
         self.status.state = "waiting" if limit == 0.0 else "following"
+        if self.follower.done and not self._ends_at_goal(self.follower):
+            self.status.state = "waiting"  # a coordinator's route that stops short (a window, a queue)
+            return 0.0, 0.0
         if self.follower.done:
             self.status.goals_reached += 1
             self._advance()
             if self.goal is None:
                 self.status.state = "done"
         return v, w
+
+    def _ends_at_goal(self, follower: PathFollower) -> bool:
+        """Whether the path followed ends at the goal (a coordinator's windowed or queued route
+        ends before it: done with it, the robot waits for the next one)."""
+        goal = self.goal
+        end = follower.path[-1]
+        return (
+            goal is None
+            or float(np.hypot(end[0] - goal[0], end[1] - goal[1])) <= 2 * self.pursuit.goal_tolerance_m
+        )
 
     def _step_aside(
         self, pose_xyyaw: tuple[float, float, float] | None, dt_s: float, decision: Decision | None

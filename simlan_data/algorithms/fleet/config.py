@@ -37,6 +37,7 @@ class FleetConfig:
     deadlock_after_s: float = 10.0  # deadlock bound: a robot waiting this long on a robot that does not move
     replan_s: float = 5.0  # least time between replans for a spent window, a queue, a stop, a failure
     unseen_cost: float = 25.0  # camera steering: route guide's extra length per metre no camera sees (0: off)
+    unseen_limit: float = 1.0  # camera steering: arcs more than this share unseen (driven that way) are not driven (1: no limit)
     reverse_ratio: float = 0.0  # planned reversing speed / speed_mps (0: never reverse; opt-in)
     shelters: bool = False  # a robot in another's way goes to a shelter first (opt-in, docs/fleet.md)
     # (both off by default: in the closed loop they reached fewer goals than without, and a
@@ -55,6 +56,7 @@ class FleetConfig:
         _within("deadlock_after_s", self.deadlock_after_s, 0.0, 600.0, "s", 10.0)
         _within("replan_s", self.replan_s, 0.0, 600.0, "s", 5.0)
         _within("unseen_cost", self.unseen_cost, 0.0, 1000.0, "", 25.0, zero_ok=True)
+        _within("unseen_limit", self.unseen_limit, 0.0, 1.0, "", 1.0, zero_ok=True)
         _within("reverse_ratio", self.reverse_ratio, 0.0, 1.0, "", 0.0, zero_ok=True)
 
     @property

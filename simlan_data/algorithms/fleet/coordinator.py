@@ -31,6 +31,7 @@ from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError
 
 MOVED_M = 0.05  # less than this in stall_s: not moving
+MOVED_RAD = 0.1  # ... and turned less than this: a robot turning on the spot is moving
 IDLE_PRIORITY = 10**9  # idle robots are planned after every robot with a goal
 
 
@@ -51,6 +52,7 @@ class _Robot:
     path_stops: tuple[int, ...] | None = None  # vertices of path_xy where it turns on the spot
     moved_at_ns: int = 0
     moved_from: tuple[float, float] = (0.0, 0.0)
+    moved_yaw: float = 0.0  # its heading then
     waiting_since_ns: int | None = None
     granted_since_ns: int | None = None  # allowed to drive on since then (its frontier ahead of it)
     stopped_since_ns: int | None = None  # treated as an obstacle from then on
@@ -111,7 +113,8 @@ class FleetCoordinator:
         """An idle robot as a mover of the lowest priority whose goal is its parking place (where it
         became idle)."""
         r = self._robots.setdefault(
-            intent.namespace, _Robot(moved_at_ns=t_ns, moved_from=intent.pose_xyyaw[:2])
+            intent.namespace,
+            _Robot(moved_at_ns=t_ns, moved_from=intent.pose_xyyaw[:2], moved_yaw=intent.pose_xyyaw[2]),
         )
         if r.park is None:
             r.park = (float(intent.pose_xyyaw[0]), float(intent.pose_xyyaw[1]))
@@ -138,10 +141,13 @@ class FleetCoordinator:
     def _observe(self, t_ns: int, movers: list[Intent]) -> None:
         """Track movement: a robot allowed to drive that has not moved for stall_s is stopped."""
         for i in movers:
-            r = self._robots.setdefault(i.namespace, _Robot(moved_at_ns=t_ns, moved_from=i.pose_xyyaw[:2]))
+            r = self._robots.setdefault(
+                i.namespace, _Robot(moved_at_ns=t_ns, moved_from=i.pose_xyyaw[:2], moved_yaw=i.pose_xyyaw[2])
+            )
             xy = i.pose_xyyaw[:2]
-            if np.hypot(xy[0] - r.moved_from[0], xy[1] - r.moved_from[1]) > MOVED_M:
-                r.moved_at_ns, r.moved_from = t_ns, xy
+            turned = abs((i.pose_xyyaw[2] - r.moved_yaw + np.pi) % (2 * np.pi) - np.pi)
+            if np.hypot(xy[0] - r.moved_from[0], xy[1] - r.moved_from[1]) > MOVED_M or turned > MOVED_RAD:
+                r.moved_at_ns, r.moved_from, r.moved_yaw = t_ns, xy, float(i.pose_xyyaw[2])
                 r.stopped_since_ns = None
             route = self.state.routes.get(i.namespace)
             if route is not None and self.graph is not None:
@@ -236,6 +242,7 @@ class FleetCoordinator:
             self.safety_m,
             reverse_ratio=self.config.reverse_ratio,
             shelters=self.config.shelters,
+            unseen_limit=self.config.unseen_limit,
         )
         plan = plan_fleet(graph, requests, obstacles, timing)
         self.state.plan, self.state.planned_at_ns = plan, t_ns
@@ -254,8 +261,9 @@ class FleetCoordinator:
             if route is None:
                 r.path_xy, r.path_reverse, r.path_stops = None, None, None
             else:
+                mine = plan.plans[i.namespace]
                 r.path_xy, r.path_reverse, r.path_stops = self._path(
-                    graph, route, i, plan.plans[i.namespace].vertices[-1].turn
+                    graph, route, i, mine.vertices[-1].turn, arrives=mine.complete and not mine.queued
                 )
 
     def _order_key(self, intent: Intent) -> tuple[bool, int, int, str]:
@@ -276,16 +284,18 @@ class FleetCoordinator:
         return Obstacle(intent.pose_xyyaw[:2], shape.reach_m, intent.pose_xyyaw[2], shape)
 
     def _path(
-        self, graph: RouteGraph, route: Route, intent: Intent, turns_last: bool
+        self, graph: RouteGraph, route: Route, intent: Intent, turns_last: bool, *, arrives: bool = True
     ) -> tuple[NDArray[np.float64], tuple[bool, ...] | None, tuple[int, ...] | None]:
         """The path the navigator follows: from the robot through the route's vertices to its goal,
         per segment whether it is driven backwards (None: none is), and the path's vertices where
         the plan turns it on the spot (None: nowhere after the start). The way from the last
-        vertex to the goal is driven as the robot arrived there, unless it turns there."""
+        vertex to the goal is driven as the robot arrived there, unless it turns there. A plan that
+        does not arrive (windowed, queued) ends at its last vertex: the straight way on from there to
+        the goal crossed shelves, and the follower's lookahead turned the robot towards it."""
         pts = [np.asarray(intent.pose_xyyaw[:2], dtype=float)] + [graph.xy[n] for n in route.nodes[1:]]
         backs = list(route.backs[1:])
         turns = list(route.turns[1:]) if route.turns else [False] * len(backs)
-        if intent.goal_xy is not None:
+        if intent.goal_xy is not None and arrives:
             pts.append(np.asarray(intent.goal_xy, dtype=float))
             backs.append(bool(route.backs[-1]) and not turns_last)
             turns.append(False)

@@ -51,6 +51,8 @@ class RouteGraph:
     seen_node: NDArray[np.bool_] | None = None
     grid: OccupancyGrid | None = None  # the floor it was built on (checks beyond the lanes' width)
     floor_clearance_m: NDArray[np.float64] | None = None  # per cell of ``grid``: to the nearest obstacle
+    # (2E,) per arc: the share of it no camera sees driven that way (None: no cameras given)
+    arc_unseen: NDArray[np.float64] | None = None
 
     @property
     def size(self) -> int:
@@ -248,11 +250,15 @@ def build_route_graph(
     index = -np.ones((br, bc), dtype=np.int64)
     index[block_r, block_c] = np.arange(len(block_r))
     edges = _free_edges(index, xy, clearance >= radius_m, grid)
-    bias, seen_node = None, None
-    if seen is not None and unseen_cost > 0 and len(edges):
-        bias = 1.0 + unseen_cost * _unseen_share(grid, xy, edges, seen)
-        seen_node = np.asarray(seen[:, cell_r, cell_c].all(axis=0))
-    return RouteGraph(xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node, grid, clearance)
+    bias, seen_node, unseen = None, None, None
+    if seen is not None and len(edges):
+        unseen = _unseen_share(grid, xy, edges, seen)
+        if unseen_cost > 0:
+            bias = 1.0 + unseen_cost * unseen
+            seen_node = np.asarray(seen[:, cell_r, cell_c].all(axis=0))
+    return RouteGraph(
+        xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node, grid, clearance, unseen
+    )
 
 
 def _unseen_share(

@@ -106,6 +106,7 @@ class Timing:
     # 1 / reverse_ratio as many steps); 0: it never reverses
     reverse_ratio: float = 0.0
     shelters: bool = False  # a robot in another's way may be sent to a shelter first (schedule.py)
+    unseen_limit: float = 1.0  # arcs more than this share unseen driven that way are not driven
 
     def steps(self, length_m: float) -> int:
         return max(1, math.ceil(length_m / self.spacing_m - 1e-6))

@@ -77,6 +77,9 @@ class Search:
         # graph keeps a lane's width clear, not a truck's 1.15 m past the node it backs to)
         # (shared by every search of this shape on the graph)
         self.back_clear: list[bool] = graph.reversing_clear(r.shape) if self.reversing else []
+        # per arc: driven that way, the robot's marker leaves the cameras for too long (it would be
+        # stopped, lost); empty: no limit (no cameras, no limit set, or a start off their floor)
+        self.blind: list[bool] = self._blind_arcs()
 
     # ------------------------------------------------------------------ geometry
 
@@ -280,14 +283,17 @@ class Search:
         turn_tol, cusp_tol = self.timing.turn_tolerance_rad, self.timing.cusp_tolerance_rad
         ahead_tol, back_tol = (cusp_tol, turn_tol) if back else (turn_tol, cusp_tol)
         out = []
+        blind = self.blind
         for v, length, angle in self._arcs(u, prev):
             ways = []  # (reversing, steps)
             if free or length <= 1e-9 or _off(cast(float, heading), angle) <= ahead_tol:
-                ways.append((False, steps(length)))
+                if not (blind and self._blind(u, v, prev, back=False)):
+                    ways.append((False, steps(length)))
             elif (
                 self.reversing
                 and _off(cast(float, heading), angle + math.pi) <= back_tol
                 and self._may_back(u, v, prev)
+                and not (blind and self._blind(u, v, prev, back=True))
             ):
                 ways.append((True, steps(length / self.timing.reverse_ratio)))
             for back2, s in ways:
@@ -297,6 +303,33 @@ class Search:
                     if math.isfinite(h2) and (exits is None or math.isfinite(self._h(exits, place2))):
                         out.append((place2, s, h2))
         return out
+
+    def _blind_arcs(self) -> list[bool]:
+        share, limit = self.graph.arc_unseen, self.timing.unseen_limit
+        if share is None or limit >= 1.0:
+            return []
+        # a robot off the cameras' floor (every way out of its node unseen) finds its way back
+        out = [share[self.graph.arc_index[(self.r.start, v)]] for v in self.graph.neighbours[self.r.start]]
+        if (
+            out
+            and min(
+                min(out),
+                min(
+                    share[self.graph.arc_index[(v, self.r.start)]]
+                    for v in self.graph.neighbours[self.r.start]
+                ),
+            )
+            > limit
+        ):
+            return []
+        return (share > limit).tolist()
+
+    def _blind(self, u: int, v: int, prev: int, *, back: bool) -> bool:
+        """Whether driving from ``u`` to ``v`` (``back``: backwards, facing from v to u) leaves the
+        cameras for too long; a robot may still drive onto its target."""
+        if prev == START or u == v or v == self.target:
+            return False
+        return self.blind[self.graph.arc_index[(v, u) if back else (u, v)]]
 
     def _may_back(self, u: int, v: int, prev: int) -> bool:
         """Whether reversing from ``u`` (from the start pose where ``prev`` is START) to ``v``
