@@ -196,11 +196,19 @@ def test_a_robot_facing_away_from_its_goal_in_a_lane_too_narrow_to_turn_drives_r
     # for good); one that reverses backs out west, facing east all the way
     grid = grid_from_boxes((32, 10), [(5, 0, 27, 4.2), (5, 5.8, 27, 10)])
     coordinator = FleetCoordinator(FleetConfig(horizon_s=20.0), CoordinatorContext(SAFETY_M, grid))
+    decide, decisions = coordinator.decide, []
+    coordinator.decide = lambda t, i: decisions.append(decide(t, i)) or decisions[-1]  # type: ignore[method-assign]
     fleet = KinematicFleet(coordinator, {"t": ((10, 5.0, 0.0), [(2, 5)], TRUCK)})
     fleet.run(200)
     assert fleet.done("t")
     assert fleet.path("t")[:, 0].max() > 27  # round by the open floor in the east
     assert coordinator.state.failures == {}
+    # the navigator is told where the plan turns it on the spot: the path turns sharply there
+    stops = [(d["t"].path_xy, k) for d in decisions if d["t"].path_stops for k in d["t"].path_stops]
+    assert stops
+    for path, k in stops:
+        a, b = path[k] - path[k - 1], path[k + 1] - path[k]
+        assert np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))) > 50
 
     config = FleetConfig(horizon_s=20.0, reverse_ratio=0.5)
     coordinator = FleetCoordinator(config, CoordinatorContext(SAFETY_M, grid))
