@@ -488,7 +488,7 @@ class GpssStack:
             self._cancelled.discard(ns)
             decision = out.decisions.get(ns)
             if decision is not None and decision.path_xy is not None:
-                self._follow_route(nav, decision.path_xy, decision.path_reverse, decision.path_stops)
+                self._follow_route(nav, decision)
             if decision is not None and decision.replan and ns in poses:
                 self._detour(ns, poses[ns], [i for i in intents if i.namespace != ns])
             if guard.speed_limit_mps is not None:
@@ -509,26 +509,19 @@ class GpssStack:
             out.commands[ns] = (cmd.linear_mps, cmd.angular_rps)
 
     @staticmethod
-    def _follow_route(
-        nav: Navigator,
-        path_xy: NDArray[np.float64],
-        reverse: tuple[bool, ...] | None,
-        stops: tuple[int, ...] | None = None,
-    ) -> None:
-        """Follow the coordinator's route (a fleet plan; ``reverse``: segments driven backwards;
-        ``stops``: vertices where it turns on the spot) unless it is the path followed already."""
+    def _follow_route(nav: Navigator, d: Decision) -> None:
+        """Follow the coordinator's route (a fleet plan: ``path_xy``, segments driven backwards,
+        vertices where it turns on the spot) unless it is the path followed already."""
+        assert d.path_xy is not None
         if nav.goal is None:  # every goal done: the coordinator moves it out of the others' way
-            nav.move_aside(path_xy, reverse, stops)
+            nav.move_aside(d.path_xy, d.path_reverse, d.path_stops)
             return
-        if (
-            nav.plan is not None
-            and np.array_equal(nav.plan.points_xy, path_xy)
-            and nav.plan.reverse == reverse
-            and nav.plan.stops == stops
-        ):
+        plan = nav.plan
+        same_way = plan is not None and (plan.reverse, plan.stops) == (d.path_reverse, d.path_stops)
+        if same_way and plan is not None and np.array_equal(plan.points_xy, d.path_xy):
             return
-        length = float(np.sum(np.linalg.norm(np.diff(path_xy, axis=0), axis=1)))
-        nav.adopt(Plan(path_xy, length, 0, reverse, stops))
+        length = float(np.sum(np.linalg.norm(np.diff(d.path_xy, axis=0), axis=1)))
+        nav.adopt(Plan(d.path_xy, length, 0, d.path_reverse, d.path_stops))
 
     def safety_states(self) -> dict[str, tuple[SafetyDecision, Monitor]]:
         """Every guarded robot's decision and state-topic values after the last control tick: the
