@@ -7,6 +7,7 @@ parametrize over the same tables.
 
 from __future__ import annotations
 
+import atexit
 import os
 import shutil
 import struct
@@ -44,6 +45,7 @@ def _alias_bomb_dir() -> list[str]:
     """Overrides selecting a spawn list of ~400 bytes whose YAML aliases stand for 9**9 values
     (composition hung, killed after 150 s), from a ``hydra.searchpath`` directory."""
     conf = Path(tempfile.mkdtemp(prefix="alias_bomb_"))
+    atexit.register(shutil.rmtree, conf, ignore_errors=True)  # (it left a directory in /tmp per run)
     (conf / "agents").mkdir()
     lines = ["# @package agents", "a0: &a0 [" + ",".join("x" * 9) + "]"]
     lines += [f"a{i}: &a{i} [" + ",".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 9)]
