@@ -25,6 +25,7 @@ from simlan_data.algorithms.fleet.execution import Route, advance, build_routes,
 from simlan_data.algorithms.fleet.footprint import Shape
 from simlan_data.algorithms.fleet.graph import RouteGraph, build_route_graph
 from simlan_data.algorithms.fleet.schedule import FleetPlan, Obstacle, Request, Timing, plan_fleet
+from simlan_data.algorithms.fleet.turns import angle_off
 from simlan_data.algorithms.occupancy import OccupancyGrid
 from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.constants import NS_PER_S
@@ -145,7 +146,7 @@ class FleetCoordinator:
                 i.namespace, _Robot(moved_at_ns=t_ns, moved_from=i.pose_xyyaw[:2], moved_yaw=i.pose_xyyaw[2])
             )
             xy = i.pose_xyyaw[:2]
-            turned = abs((i.pose_xyyaw[2] - r.moved_yaw + np.pi) % (2 * np.pi) - np.pi)
+            turned = angle_off(r.moved_yaw, i.pose_xyyaw[2])
             if np.hypot(xy[0] - r.moved_from[0], xy[1] - r.moved_from[1]) > MOVED_M or turned > MOVED_RAD:
                 r.moved_at_ns, r.moved_from, r.moved_yaw = t_ns, xy, float(i.pose_xyyaw[2])
                 r.stopped_since_ns = None

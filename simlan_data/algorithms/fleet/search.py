@@ -29,7 +29,7 @@ from simlan_data.algorithms.fleet.conflicts import ConflictCache
 from simlan_data.algorithms.fleet.footprint import Region
 from simlan_data.algorithms.fleet.graph import RouteGraph
 from simlan_data.algorithms.fleet.plans import Request, RobotPlan, Timing, Vertex, start_region
-from simlan_data.algorithms.fleet.turns import ToGoal
+from simlan_data.algorithms.fleet.turns import ToGoal, angle_off
 
 
 class Reservations(Protocol):
@@ -169,7 +169,10 @@ class Search:
         best = math.inf
         for v, length, angle in self._arcs(r.start, START):
             if r.heading_rad is not None and length > 1e-9 and not self.turns.within(r.heading_rad, angle):
-                if self.reversing and _off(r.heading_rad, angle + math.pi) <= self.timing.cusp_tolerance_rad:
+                if (
+                    self.reversing
+                    and angle_off(r.heading_rad, angle + math.pi) <= self.timing.cusp_tolerance_rad
+                ):
                     best = min(best, length + to.facing(v, angle + math.pi))
                 continue
             rest = to.facing(v, angle) if v == r.start else to.arc[self.graph.arc_index[(r.start, v)]]
@@ -286,12 +289,12 @@ class Search:
         blind = self.blind
         for v, length, angle in self._arcs(u, prev):
             ways = []  # (reversing, steps)
-            if free or length <= 1e-9 or _off(cast(float, heading), angle) <= ahead_tol:
+            if free or length <= 1e-9 or angle_off(cast(float, heading), angle) <= ahead_tol:
                 if not (blind and self._blind(u, v, prev, back=False)):
                     ways.append((False, steps(length)))
             elif (
                 self.reversing
-                and _off(cast(float, heading), angle + math.pi) <= back_tol
+                and angle_off(cast(float, heading), angle + math.pi) <= back_tol
                 and self._may_back(u, v, prev)
                 and not (blind and self._blind(u, v, prev, back=True))
             ):
@@ -308,19 +311,10 @@ class Search:
         share, limit = self.graph.arc_unseen, self.timing.unseen_limit
         if share is None or limit >= 1.0:
             return []
-        # a robot off the cameras' floor (every way out of its node unseen) finds its way back
-        out = [share[self.graph.arc_index[(self.r.start, v)]] for v in self.graph.neighbours[self.r.start]]
-        if (
-            out
-            and min(
-                min(out),
-                min(
-                    share[self.graph.arc_index[(v, self.r.start)]]
-                    for v in self.graph.neighbours[self.r.start]
-                ),
-            )
-            > limit
-        ):
+        # a robot off the cameras' floor (every way out of its node unseen, either way) finds its way back
+        start, index = self.r.start, self.graph.arc_index
+        ways = [share[index[arc]] for v in self.graph.neighbours[start] for arc in ((start, v), (v, start))]
+        if ways and min(ways) > limit:
             return []
         return (share > limit).tolist()
 
@@ -439,8 +433,3 @@ class Search:
             d = self.graph.xy[v] - here
             out.append((v, float(np.hypot(*d)), float(np.arctan2(d[1], d[0]))))
         return out
-
-
-def _off(heading: float, angle: float) -> float:
-    """How far ``angle`` lies from ``heading`` (radians, 0..pi)."""
-    return abs((angle - heading + math.pi) % (2 * math.pi) - math.pi)

@@ -58,7 +58,7 @@ class TurnGraph:
         self._cache: dict[tuple[int, bytes | None, float, bool], ToGoal] = {}  # replans ask the same again
 
     def within(self, heading: float, angle: float) -> bool:
-        return abs((angle - heading + math.pi) % (2 * math.pi) - math.pi) <= self.tolerance_rad
+        return angle_off(heading, angle) <= self.tolerance_rad
 
     def to_goal(
         self,
@@ -140,3 +140,8 @@ class ToGoal:
             self._leave[b] for b in self.turns.out[node] if self.turns.within(heading, self.turns.angles[b])
         ]
         return float(min(ok, default=math.inf))
+
+
+def angle_off(heading: float, angle: float) -> float:
+    """How far ``angle`` lies from ``heading`` (radians, 0..pi)."""
+    return abs((angle - heading + math.pi) % (2 * math.pi) - math.pi)
