@@ -435,6 +435,61 @@ def test_real_layout_route_graph_has_aisles_junctions_and_turn_limits() -> None:
     assert graph.turnable(1.31).sum() > 0.5 * graph.size
 
 
+def test_each_robot_drives_the_edges_of_its_own_width() -> None:
+    # the graph is built for the narrowest robot; a wider robot's view drives exactly the edges a
+    # graph built for its width has (real layout: the Jackal's lanes and the pallet truck's)
+    from simlan_data.world.agent_types import AGENT_TYPES
+
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=RES)
+    lane = FleetConfig().lane_clearance_m
+    narrow, wide = (AGENT_TYPES[t].half_width_m + lane for t in ("jackal", "pallet_truck"))
+    graph = build_route_graph(grid, radius_m=narrow, spacing_m=1.0, reach_m=1.31)
+    own = build_route_graph(grid, radius_m=wide, spacing_m=1.0, reach_m=1.31)
+    view = graph.for_width(wide)
+    assert view.for_width(narrow) is view and graph.for_width(narrow) is graph
+
+    def segments(g, pairs):  # edges as coordinate pairs (node indices differ between graphs)
+        return {tuple(np.round(g.xy[[u, v]], 6).ravel()) for u, v in pairs}
+
+    driven = [(u, v) for u in range(view.size) for v in view.neighbours[u] if u < v]
+    assert segments(view, driven) == segments(own, own.edges.tolist())
+    assert len(driven) < len(graph.edges)  # the Jackal has lanes the truck has not
+    # the cross-aisle at x = 20 from the upper aisle down to the main one: a Jackal's way only
+    start, top = graph.nearest((20.0, 5.4), within_m=1.0), graph.nearest((20.0, 0.5), within_m=1.0)
+    assert start is not None and top is not None
+    assert graph.components[start] == graph.components[top]
+    assert np.isfinite(graph.turns(0.47, np.radians(20)).to_goal(top, forward=False).node[start])
+    via = view.turns(1.31, np.radians(20)).to_goal(top, forward=False).node[start]
+    assert via > 2 * graph.turns(0.47, np.radians(20)).to_goal(top, forward=False).node[start]  # round
+
+
+def test_a_jackal_head_on_with_a_pallet_truck_in_the_upper_aisle_steps_out_by_a_jackal_wide_passage() -> None:
+    # the held-out case of issue 23 on the real layout (kinematic): a pallet truck east through the
+    # single-lane upper aisle to its mouth at x = 20, a Jackal west through it from inside the pocket
+    # beyond; a truck and a forklift head-on in the main aisle. The Jackal's only way out of the
+    # truck's is the cross-aisle at x = 20, too narrow for the truck: with one graph for the widest
+    # robot it retreated into the pocket and the parked truck shut it in (2 / 4 goals in the closed
+    # loop); every goal now
+    from simlan_data.world.agent_types import AGENT_TYPES
+
+    truck, jackal, forklift = (AGENT_TYPES[t].footprint_m for t in ("pallet_truck", "jackal", "forklift"))
+    grid = grid_from_world(load_layout("warehouse_layout.csv", "default"), resolution_m=RES)
+    robots = {
+        "t1": ((-22, 5.4, 0.0), [(20, 5.4)], truck),
+        "j": ((18, 5.4, np.pi), [(-20, 5.4)], jackal),
+        "t2": ((-20, 1.5, 0.0), [(20, -0.5)], truck),
+        "f": ((15, -0.5, np.pi), [(-15, 1.8)], forklift),
+    }
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(0.6, grid))
+    fleet = KinematicFleet(coordinator, robots)
+    fleet.run(300)
+    assert fleet.goals_left() == 0
+    jackal_path = fleet.path("j")
+    assert (jackal_path[:, 1] < 3.0).any()  # it left the aisle by the cross-aisle (to the main aisle)
+    assert fleet.min_gap_m(5) >= 0.6
+    assert coordinator.state.failures == {}
+
+
 def test_config_rejects_a_bad_value_naming_the_key() -> None:
     with pytest.raises(ConfigError, match=r"algorithms\.coordinator\.spacing_m"):
         FleetConfig(spacing_m=0.0)

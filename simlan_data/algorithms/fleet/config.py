@@ -24,7 +24,7 @@ class FleetConfig:
     """Route graph, timing and execution of the fleet coordinator (see docs/fleet.md)."""
 
     spacing_m: float = 1.0  # route graph block size: node spacing on open floor, one plan step of travel
-    lane_clearance_m: float = 0.25  # a lane keeps the widest robot's half width plus this from obstacles
+    lane_clearance_m: float = 0.25  # a robot's lanes keep its half width plus this from obstacles (each robot its own lanes)
     speed_mps: float = 0.5  # planning speed (a step lasts spacing_m / speed_mps)
     horizon_s: float = 90.0  # reservation horizon: how far ahead plans are reserved
     safety_m: float = (

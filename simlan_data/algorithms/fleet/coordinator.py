@@ -123,21 +123,28 @@ class FleetCoordinator:
 
     # ------------------------------------------------------------------ steps
     def _graph(self, intents: list[Intent]) -> RouteGraph:
-        """Build the route graph once, for the widest robot seen at the first tick (on the floor the
-        cameras see, where robots steer on them)."""
+        """Build the route graph once, for the narrowest robot seen at the first tick (on the floor
+        the cameras see, where robots steer on them); each robot drives the edges of its own width
+        (``RouteGraph.for_width``): a Jackal passes where a pallet truck does not."""
         if self.graph is None:
             robots = [i for i in intents if i.yields] or intents
-            half = max((max(abs(i.footprint_m[2]), abs(i.footprint_m[3])) for i in robots), default=0.5)
             reach = max((reach_of(i.footprint_m) for i in robots), default=0.5)
             self.graph = build_route_graph(
                 self.grid,
-                radius_m=half + self.config.lane_clearance_m,
+                radius_m=min(
+                    (self._lane_radius(i) for i in robots), default=0.5 + self.config.lane_clearance_m
+                ),
                 spacing_m=self.config.spacing_m,
                 reach_m=reach,
                 seen=self.seen,
                 unseen_cost=self.config.unseen_cost,
             )
         return self.graph
+
+    def _lane_radius(self, intent: Intent) -> float:
+        """How far a robot's centre keeps from obstacles on its lanes: half its width plus the lane
+        clearance."""
+        return max(abs(intent.footprint_m[2]), abs(intent.footprint_m[3])) + self.config.lane_clearance_m
 
     def _observe(self, t_ns: int, movers: list[Intent]) -> None:
         """Track movement: a robot allowed to drive that has not moved for stall_s is stopped."""
@@ -218,7 +225,9 @@ class FleetCoordinator:
                 obstacles.append(self._obstacle(i))
                 continue  # until it moves again (on its own navigator's plan): then it rejoins
             xy = i.pose_xyyaw[:2]
-            start = graph.start_node(xy, i.pose_xyyaw[2], within_m=snap)
+            lane_radius = self._lane_radius(i)
+            lanes = graph.for_width(lane_radius)
+            start = lanes.start_node(xy, i.pose_xyyaw[2], within_m=snap)
             if start is None:
                 obstacles.append(self._obstacle(i))
                 continue
@@ -228,13 +237,14 @@ class FleetCoordinator:
                 Request(
                     i.namespace,
                     start,
-                    graph.nearest(i.goal_xy, within_m=snap),
+                    lanes.nearest(i.goal_xy, within_m=snap),
                     shape,
                     xy,
                     i.pose_xyyaw[2],
                     goal_xy=i.goal_xy,
                     start_turnable=graph.floor_clearance_at(xy) >= shape.reach_m,
                     idle=i.priority >= IDLE_PRIORITY,
+                    lane_radius_m=lane_radius,
                 )
             )
         timing = Timing(

@@ -21,7 +21,7 @@ place only at a node seen at every heading (a turn elsewhere can lose the camera
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -53,6 +53,10 @@ class RouteGraph:
     floor_clearance_m: NDArray[np.float64] | None = None  # per cell of ``grid``: to the nearest obstacle
     # (2E,) per arc: the share of it no camera sees driven that way (None: no cameras given)
     arc_unseen: NDArray[np.float64] | None = None
+    # (E,) per edge: the least clearance along it (None: unknown; every edge keeps ``radius_m``)
+    edge_clearance_m: NDArray[np.float64] | None = None
+    # (E,) per edge: whether this graph's robots may drive it (None: all; see ``for_width``)
+    edge_ok: NDArray[np.bool_] | None = None
 
     @property
     def size(self) -> int:
@@ -64,19 +68,55 @@ class RouteGraph:
         return np.linalg.norm(self.xy[self.edges[:, 0]] - self.xy[self.edges[:, 1]], axis=1)
 
     @cached_property
+    def usable(self) -> NDArray[np.bool_]:
+        """(N,) nodes this graph's robots may stand on (their lane radius clear of obstacles)."""
+        return np.asarray(self.clearance_m >= self.radius_m - 1e-9)
+
+    @cached_property
+    def arc_ok(self) -> NDArray[np.bool_]:
+        """(2E,) per arc of ``arcs``: whether this graph's robots may drive it."""
+        ok = np.ones(len(self.edges), dtype=bool) if self.edge_ok is None else self.edge_ok
+        return np.concatenate([ok, ok])
+
+    def for_width(self, radius_m: float) -> RouteGraph:
+        """The graph for robots of lane radius ``radius_m``: the same nodes and arcs (indices are
+        shared, so plans of robots of every width meet in one reservation table), but only the edges
+        that keep that radius clear are driven (their neighbours, lengths, components). The graph is
+        built for the narrowest robot; the view for a wider one drives exactly the edges a graph
+        built for it would have (a node is the block's clearest cell whatever the radius). A graph
+        narrower than this one is this one."""
+        if radius_m <= self.radius_m + 1e-9 or self.edge_clearance_m is None:
+            return self
+        key = round(radius_m, 6)
+        if key not in self._views:
+            ok = self.edge_clearance_m >= radius_m
+            self._views[key] = replace(self, radius_m=radius_m, edge_ok=ok)
+        return self._views[key]
+
+    @cached_property
+    def _views(self) -> dict[float, RouteGraph]:
+        return {}
+
+    @cached_property
+    def _driven(self) -> NDArray[np.int64]:
+        """The edges this graph's robots may drive."""
+        return self.edges if self.edge_ok is None else self.edges[self.edge_ok]
+
+    @cached_property
     def neighbours(self) -> list[list[int]]:
-        """Adjacency lists (sorted: deterministic searches)."""
+        """Adjacency lists of the edges driven (sorted: deterministic searches)."""
         adj: list[list[int]] = [[] for _ in range(self.size)]
-        for u, v in self.edges.tolist():
+        for u, v in self._driven.tolist():
             adj[u].append(v)
             adj[v].append(u)
         return [sorted(a) for a in adj]
 
     @cached_property
     def matrix(self) -> csr_matrix:
-        """Symmetric sparse matrix of edge lengths (scipy.sparse.csgraph's input)."""
-        u, v = self.edges[:, 0], self.edges[:, 1]
-        data = np.concatenate([self.lengths_m, self.lengths_m])
+        """Symmetric sparse matrix of the driven edges' lengths (scipy.sparse.csgraph's input)."""
+        u, v = self._driven[:, 0], self._driven[:, 1]
+        lengths = self.lengths_m if self.edge_ok is None else self.lengths_m[self.edge_ok]
+        data = np.concatenate([lengths, lengths])
         return csr_matrix((data, (np.concatenate([u, v]), np.concatenate([v, u]))), shape=(self.size,) * 2)
 
     @cached_property
@@ -176,6 +216,7 @@ class RouteGraph:
             arcs = self.arcs
             d = self.xy[arcs[:, 1]] - self.xy[arcs[:, 0]]
             lengths = np.hypot(d[:, 0], d[:, 1])
+            lengths = np.where(self.arc_ok, lengths, np.inf)  # arcs too narrow for these robots
             self._turn_graphs[key] = TurnGraph(
                 arcs,
                 lengths if self.arc_bias is None else lengths * self.arc_bias,
@@ -187,18 +228,23 @@ class RouteGraph:
         return self._turn_graphs[key]
 
     def nearest(self, xy: tuple[float, float], *, within_m: float) -> int | None:
-        """The node nearest to ``xy`` if one lies within ``within_m``, else None."""
-        dist, index = self.tree.query(np.asarray(xy, dtype=float))
-        return int(index) if np.isfinite(dist) and dist <= within_m else None
+        """The node nearest to ``xy`` (of those this graph's robots may stand on) if one lies
+        within ``within_m``, else None."""
+        near = self._near(xy, within_m)
+        return near[0] if near else None
+
+    def _near(self, xy: tuple[float, float], within_m: float) -> list[int]:
+        """The usable nodes within ``within_m`` of ``xy``, nearest first."""
+        here = np.asarray(xy, dtype=float)
+        near = [n for n in self.tree.query_ball_point(here, within_m) if self.usable[n]]
+        return sorted(near, key=lambda n: (float(np.hypot(*(self.xy[n] - here))), n))
 
     def start_node(self, xy: tuple[float, float], heading_rad: float, *, within_m: float) -> int | None:
         """The node a robot at ``xy`` facing ``heading_rad`` starts from: the nearest within
         ``within_m``, unless no edge leaves it ahead of that heading (a stub beside the lane the robot
         drives): then the nearest node ahead of the robot that has one. None if no node is near."""
         here = np.asarray(xy, dtype=float)
-        near = sorted(
-            self.tree.query_ball_point(here, within_m), key=lambda n: float(np.hypot(*(self.xy[n] - here)))
-        )
+        near = self._near(xy, within_m)
         if not near:
             return None
         ahead = np.array([np.cos(heading_rad), np.sin(heading_rad)])
@@ -249,7 +295,7 @@ def build_route_graph(
     xy = grid.to_xy(np.stack([cell_r, cell_c], axis=1))
     index = -np.ones((br, bc), dtype=np.int64)
     index[block_r, block_c] = np.arange(len(block_r))
-    edges = _free_edges(index, xy, clearance >= radius_m, grid)
+    edges, edge_clearance = _free_edges(index, xy, clearance, radius_m, grid)
     bias, seen_node, unseen = None, None, None
     if seen is not None and len(edges):
         unseen = _unseen_share(grid, xy, edges, seen)
@@ -257,7 +303,16 @@ def build_route_graph(
             bias = 1.0 + unseen_cost * unseen
             seen_node = np.asarray(seen[:, cell_r, cell_c].all(axis=0))
     return RouteGraph(
-        xy, clearance[cell_r, cell_c], edges, radius_m, bias, seen_node, grid, clearance, unseen
+        xy,
+        clearance[cell_r, cell_c],
+        edges,
+        radius_m,
+        bias,
+        seen_node,
+        grid,
+        clearance,
+        unseen,
+        edge_clearance,
     )
 
 
@@ -293,9 +348,14 @@ def _samples(
 
 
 def _free_edges(
-    index: NDArray[np.int64], xy: NDArray[np.float64], free: NDArray[np.bool_], grid: OccupancyGrid
-) -> NDArray[np.int64]:
-    """Pairs of nodes in neighbouring blocks whose straight segment stays on free cells."""
+    index: NDArray[np.int64],
+    xy: NDArray[np.float64],
+    clearance: NDArray[np.float64],
+    radius_m: float,
+    grid: OccupancyGrid,
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Pairs of nodes in neighbouring blocks whose straight segment keeps ``radius_m`` clear (every
+    cell it crosses), with the least clearance along each."""
     pairs = []
     br, bc = index.shape
     for dr, dc in _NEIGHBOURS:
@@ -306,10 +366,13 @@ def _free_edges(
         pairs.append(np.stack([a[ok], b[ok]], axis=1))
     cand = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
     if not len(cand):
-        return cand
+        return cand, np.zeros(0)
     rows, cols = _samples(grid, xy[cand[:, 0]], xy[cand[:, 1]])
-    inside = (rows >= 0) & (cols >= 0) & (rows < free.shape[0]) & (cols < free.shape[1])
-    ok = inside.all(axis=1)
-    ok[ok] = free[rows[ok].clip(0), cols[ok].clip(0)].all(axis=1)
-    out = np.sort(cand[ok], axis=1)
-    return out[np.lexsort((out[:, 1], out[:, 0]))]
+    inside = (rows >= 0) & (cols >= 0) & (rows < clearance.shape[0]) & (cols < clearance.shape[1])
+    least = np.where(
+        inside, clearance[rows.clip(0, clearance.shape[0] - 1), cols.clip(0, clearance.shape[1] - 1)], 0.0
+    ).min(axis=1)
+    ok = least >= radius_m
+    out, least = np.sort(cand[ok], axis=1), least[ok]
+    order = np.lexsort((out[:, 1], out[:, 0]))
+    return out[order], least[order]

@@ -28,6 +28,7 @@ class Request:
     goal_xy: tuple[float, float] | None = None  # the real goal, driven to from the goal node
     start_turnable: bool = True  # it may turn in place where it stands
     idle: bool = False  # every goal done: its goal is where it parks; it moves aside, never goes first
+    lane_radius_m: float = 0.0  # its half width plus the lane clearance: the edges it drives (0: all)
 
 
 @dataclass(frozen=True)

@@ -207,7 +207,8 @@ def _plan_in_order(
     out = FleetPlan()
     pending = []
     for r in requests:  # robots that cannot be planned stand where they are, for everyone
-        if r.goal is None or graph.components[r.goal] != graph.components[r.start]:
+        lanes = graph.for_width(r.lane_radius_m)
+        if r.goal is None or lanes.components[r.goal] != lanes.components[r.start]:
             out.failures[r.name] = "unreachable"
             table.add_plan(_standing(r), stays=True)
         elif r.name in standing:
@@ -285,6 +286,7 @@ def _shelter(
     another robot's ``way`` to its goal and of whatever stays held; None if there is none."""
     if way is None:
         return None
+    graph = graph.for_width(b.lane_radius_m)
     xy = graph.xy
     reach = b.shape.reach_m
     d = fp.segment_distances(xy, xy, way[0], way[1])
@@ -317,6 +319,7 @@ def _plan_one(
 ) -> RobotPlan | None:
     """A space-time search to the goal, or (``queue``) to a queue node outside it when the goal is held."""
     assert r.goal is not None
+    graph = graph.for_width(r.lane_radius_m)  # the edges it is wide enough for
     search = Search(graph, r, table, timing)
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
     # obstacles), so a detour round a lane that stays blocked is found without searching the lane
