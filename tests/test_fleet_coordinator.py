@@ -490,6 +490,71 @@ def test_a_jackal_head_on_with_a_pallet_truck_in_the_upper_aisle_steps_out_by_a_
     assert coordinator.state.failures == {}
 
 
+def test_a_robot_standing_where_it_cannot_turn_leaves_its_start_only_nearly_in_line() -> None:
+    # open floor with a wall 0.95 m above the start: a forklift (reach 1.38 m with the tracking
+    # allowance) cannot pivot there, so no forward move off its start is more than the cusp
+    # tolerance off its heading (leaving on an arc 52 degrees off, a forklift parked beside a shelf
+    # swung its tail into it); where it can pivot, the usual turn tolerance holds
+    from simlan_data.world.agent_types import AGENT_TYPES
+
+    grid = grid_from_boxes((20, 10), [(0, 6.0, 20, 10)])
+    shape = Shape.of(AGENT_TYPES["forklift"].footprint_m, tolerance_m=0.15)
+    graph = build_route_graph(grid, radius_m=0.7, spacing_m=1.0, reach_m=shape.reach_m)
+    timing = Timing(1.0, 45, SAFETY_M)
+
+    def first_moves(xy: tuple[float, float], turnable: bool, **timing_args: float) -> list[float]:
+        start = graph.nearest(xy, within_m=1.5)
+        goal = graph.nearest((2.0, 1.5), within_m=1.5)
+        assert start is not None and goal is not None
+        request = Request("f", start, goal, shape, xy, 0.0, start_turnable=turnable)
+        t = Timing(1.0, 45, SAFETY_M, **timing_args)
+        search = Search(graph, request, Reservations(graph, t.horizon, t.safety_m), t)
+        to = search.to_goal(goal)
+        places = search._next_places((start, -1, False, False), to, None)
+        angles = []
+        for (v, _, _, back), _, _ in places:
+            d = graph.xy[v] - np.asarray(xy)
+            if np.hypot(*d) > 1e-6:
+                angles.append((np.degrees(np.arctan2(d[1], d[0])), back))
+        return angles
+
+    near_wall = (10.2, 5.05)
+    assert graph.floor_clearance_at(near_wall) < shape.reach_m
+    beside = first_moves(near_wall, False)
+    assert beside and all(abs(a) <= 20.0 + 1e-6 for a, back in beside if not back)
+    assert not any(back for _, back in beside)  # it never reverses (start_back_ratio 0)
+    assert any(abs(a) > 20.0 for a, _ in first_moves(near_wall, True))  # where it could pivot
+    # 1.3 m from the wall it cannot turn a full circle (reach 1.38 m) but its outline clears the
+    # wall turning 50 degrees either way (RouteGraph.pivot_clear): the usual turn tolerance
+    roomier = (10.2, 4.7)
+    assert graph.floor_clearance_at(roomier) < shape.reach_m
+    assert any(abs(a) > 20.0 for a, back in first_moves(roomier, False) if not back)
+    assert graph.pivot_clear(np.array(roomier), shape, 0.0, np.radians(45))
+    assert not graph.pivot_clear(np.array(near_wall), shape, 0.0, np.radians(45))
+    # backing off its start (start_back_ratio): a node nearly behind it
+    backing = [a for a, back in first_moves(near_wall, False, start_back_ratio=0.5) if back]
+    assert backing and all(abs(abs(a) - 180.0) <= 20.0 + 1e-6 for a in backing)
+    del timing
+
+
+def test_an_idle_robot_that_cannot_plan_where_it_creeps_does_not_replan_every_tick() -> None:
+    # an idle pallet truck settling where it parked (0.1 mm per tick) whose standing plan fails (a
+    # person stands closer to it than the safety distance): it parked again where it stood at every
+    # replan, a new goal at every tick, so the fleet replanned at every tick (a closed-loop run
+    # simulated 1 s in 8 s of wall time)
+    grid = grid_from_boxes((24, 8), [])
+    coordinator = FleetCoordinator(FleetConfig(), CoordinatorContext(SAFETY_M, grid))
+    for k in range(400):
+        intents = [
+            Intent("a", 1, (2.0, 2.0, 0.0), JACKAL, None, goal_xy=(20.0, 2.0)),
+            Intent("p", 2, (12.0 + 1e-4 * k, 5.0, 0.0), TRUCK, None, goal_xy=None),
+            Intent("person", 3, (12.0, 5.8, 0.0), JACKAL, None, yields=False),
+        ]
+        coordinator.decide(round(k * 0.05 * 1e9), intents)
+    assert coordinator.state.failures.get("p") == "blocked"  # it cannot even stand clear
+    assert coordinator.state.replans < 10  # 20 s: a periodic replan every replan_s at most
+
+
 def test_config_rejects_a_bad_value_naming_the_key() -> None:
     with pytest.raises(ConfigError, match=r"algorithms\.coordinator\.spacing_m"):
         FleetConfig(spacing_m=0.0)

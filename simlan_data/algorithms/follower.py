@@ -118,6 +118,10 @@ class PursuitParams:
     min_regulated_speed_mps: float = 0.25
     approach_distance_m: float = 1.2  # slow down this close to the goal
     goal_tolerance_m: float = 0.3
+    # a section that ends before the path does (a turn on the spot, a change of direction) ends only
+    # this close along the path to its end vertex: the plan reserved the turn there (a pallet truck
+    # that turned 0.28 m short of its turn vertex swept its tail into a shelf end)
+    stop_tolerance_m: float = 0.05
 
 
 class PathFollower:
@@ -241,10 +245,13 @@ class PathFollower:
             self._progress_m = min(self._project(pos), end)
             goal = self.point_at(end)
             dist_goal = float(np.linalg.norm(goal - pos))
-            if not (
-                dist_goal < p.goal_tolerance_m
-                or (end - self._progress_m < p.goal_tolerance_m and dist_goal < 2 * p.goal_tolerance_m)
-            ):
+            if self.section < len(self._ends) - 1:  # a stop on the way: reached along the path
+                reached = end - self._progress_m < p.stop_tolerance_m and dist_goal < p.goal_tolerance_m
+            else:
+                reached = dist_goal < p.goal_tolerance_m or (
+                    end - self._progress_m < p.goal_tolerance_m and dist_goal < 2 * p.goal_tolerance_m
+                )
+            if not reached:
                 break
             self._speed = 0.0
             if self.section == len(self._ends) - 1:

@@ -24,7 +24,7 @@ class FleetConfig:
     """Route graph, timing and execution of the fleet coordinator (see docs/fleet.md)."""
 
     spacing_m: float = 1.0  # route graph block size: node spacing on open floor, one plan step of travel
-    lane_clearance_m: float = 0.25  # a robot's lanes keep its half width plus this from obstacles (each robot its own lanes)
+    lane_clearance_m: float = 0.25  # a robot's lanes keep its own half width plus this from obstacles
     speed_mps: float = 0.5  # planning speed (a step lasts spacing_m / speed_mps)
     horizon_s: float = 90.0  # reservation horizon: how far ahead plans are reserved
     safety_m: float = (
@@ -39,7 +39,9 @@ class FleetConfig:
     unseen_cost: float = 25.0  # camera steering: route guide's extra length per metre no camera sees (0: off)
     unseen_limit: float = 1.0  # camera steering: arcs more than this share unseen (driven that way) are not driven (1: no limit)
     reverse_ratio: float = 0.0  # planned reversing speed / speed_mps (0: never reverse; opt-in)
+    start_back_ratio: float = 0.0  # backing off its start: this share of speed_mps (0: never, docs/fleet.md)
     shelters: bool = False  # a robot in another's way goes to a shelter first (opt-in, docs/fleet.md)
+    soft_waiting: bool = True  # the route guide counts 3 m more per arc where robots not planned yet stand
     # (both off by default: in the closed loop they reached fewer goals than without, and a
     # reversing truck backed into a shelf before its tail was checked: docs/fleet.md)
 
@@ -58,6 +60,7 @@ class FleetConfig:
         _within("unseen_cost", self.unseen_cost, 0.0, 1000.0, "", 25.0, zero_ok=True)
         _within("unseen_limit", self.unseen_limit, 0.0, 1.0, "", 1.0, zero_ok=True)
         _within("reverse_ratio", self.reverse_ratio, 0.0, 1.0, "", 0.0, zero_ok=True)
+        _within("start_back_ratio", self.start_back_ratio, 0.0, 1.0, "", 0.0, zero_ok=True)
 
     @property
     def step_s(self) -> float:

@@ -13,6 +13,8 @@ speed limit that stops it before the first vertex it may not enter yet.
 
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import dataclass, field, replace
 from typing import ClassVar
 
@@ -31,6 +33,9 @@ from simlan_data.algorithms.roles import CoordinatorContext
 from simlan_data.constants import NS_PER_S
 from simlan_data.errors import ConfigError
 
+log = logging.getLogger(__name__)
+
+SLOW_REPLAN_S = 1.0  # a replan longer than this (wall time) is logged with the robots' poses
 MOVED_M = 0.05  # less than this in stall_s: not moving
 MOVED_RAD = 0.1  # ... and turned less than this: a robot turning on the spot is moving
 IDLE_PRIORITY = 10**9  # idle robots are planned after every robot with a goal
@@ -252,10 +257,24 @@ class FleetCoordinator:
             self.config.horizon_steps,
             self.safety_m,
             reverse_ratio=self.config.reverse_ratio,
+            start_back_ratio=self.config.start_back_ratio,
             shelters=self.config.shelters,
+            soft_waiting=self.config.soft_waiting,
             unseen_limit=self.config.unseen_limit,
         )
+        started = time.perf_counter()
         plan = plan_fleet(graph, requests, obstacles, timing)
+        took = time.perf_counter() - started
+        if took > SLOW_REPLAN_S:  # (the run's log: where the planning time of a slow run went)
+            log.info(
+                "fleet replan at %.1f s took %.1f s: %s",
+                t_ns / NS_PER_S,
+                took,
+                ", ".join(
+                    f"{i.namespace} at ({i.pose_xyyaw[0]:.2f}, {i.pose_xyyaw[1]:.2f}, {i.pose_xyyaw[2]:.2f})"
+                    for i in movers
+                ),
+            )
         self.state.plan, self.state.planned_at_ns = plan, t_ns
         self.state.routes = build_routes(plan, self.safety_m)
         self.state.failures.update(plan.failures)
@@ -263,11 +282,14 @@ class FleetCoordinator:
         for i in movers:
             route = self.state.routes.get(i.namespace)
             r = self._robots[i.namespace]
-            if i.priority >= IDLE_PRIORITY and i.namespace in plan.failures:
+            if i.priority >= IDLE_PRIORITY and i.namespace in plan.failures and not self._at(i, r.park):
                 # an idle robot that cannot get back to where it parked (it moved aside) parks where
                 # it is: standing failed, it held the spot for good, and once that spot was another
                 # robot's goal that robot queued for ever (4 robots, seed 7); parked here, it is
-                # planned last and moves aside when a robot with a goal needs the place
+                # planned last and moves aside when a robot with a goal needs the place. Not again
+                # where it already parks: a standing robot's pose jitters by micrometres, the new
+                # park was a new goal, and a new goal a replan at every tick (a run's planning took
+                # 8 s of wall time per second simulated, a pallet truck parked at its goal)
                 r.park = (float(i.pose_xyyaw[0]), float(i.pose_xyyaw[1]))
             if route is None:
                 r.path_xy, r.path_reverse, r.path_stops = None, None, None

@@ -27,6 +27,7 @@ class Shape:
     front_m: float  # x of the nose
     half_width_m: float
     reach_m: float  # the circle it sweeps turning in place
+    tolerance_m: float = 0.0  # how much half_width_m and reach_m were grown (tracking error)
 
     @classmethod
     def of(cls, footprint_m: tuple[float, float, float, float], *, tolerance_m: float = 0.0) -> Shape:
@@ -34,12 +35,12 @@ class Shape:
         x0, x1, y0, y1 = footprint_m
         half = max(abs(y0), abs(y1))
         reach = float(np.hypot(max(abs(x0), abs(x1)), half))
-        return cls(min(x0, 0.0), max(x1, 0.0), half + tolerance_m, reach + tolerance_m)
+        return cls(min(x0, 0.0), max(x1, 0.0), half + tolerance_m, reach + tolerance_m, tolerance_m)
 
     def reversed(self) -> Shape:
         """The same footprint facing the other way (a robot reversing sweeps what it would
         driving forwards with this shape)."""
-        return Shape(-self.front_m, -self.back_m, self.half_width_m, self.reach_m)
+        return Shape(-self.front_m, -self.back_m, self.half_width_m, self.reach_m, self.tolerance_m)
 
 
 def region(*parts: Region) -> Region:

@@ -197,6 +197,25 @@ class RouteGraph:
         )
         return np.asarray((clear >= radius_m - 0.5 * self.grid.resolution_m).all(axis=1))
 
+    def pivot_clear(self, xy: NDArray[np.float64], shape: Shape, from_rad: float, to_rad: float) -> bool:
+        """Whether a robot of ``shape`` (its real rectangle, without the tracking allowance) standing
+        at ``xy`` turns on the spot from ``from_rad`` to ``to_rad`` (the shorter way) without its
+        outline crossing an obstacle of the floor (sampled every 0.05 rad; True without a grid)."""
+        if self.grid is None:
+            return True
+        turn = (to_rad - from_rad + np.pi) % (2 * np.pi) - np.pi
+        yaws = from_rad + np.linspace(0.0, turn, max(2, int(np.ceil(abs(turn) / 0.05)) + 1))
+        half = shape.half_width_m - shape.tolerance_m
+        corners = np.array(
+            [[shape.back_m, -half], [shape.front_m, -half], [shape.front_m, half], [shape.back_m, half]]
+        )
+        c, s_ = np.cos(yaws)[:, None], np.sin(yaws)[:, None]
+        x = xy[0] + c * corners[None, :, 0] - s_ * corners[None, :, 1]  # (yaws, 4)
+        y = xy[1] + s_ * corners[None, :, 0] + c * corners[None, :, 1]
+        pts = np.stack([x, y], axis=-1)
+        p, q = pts.reshape(-1, 2), np.roll(pts, -1, axis=1).reshape(-1, 2)  # the outline's sides
+        return bool(self.capsules_clear(p, q, self.grid.resolution_m).all())
+
     def reversing_clear(self, shape: Shape) -> list[bool]:
         """Per arc: whether a robot of ``shape`` reversing along it keeps its tail, which leads,
         off the floor's obstacles (built once per shape)."""

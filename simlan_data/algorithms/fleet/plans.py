@@ -106,6 +106,11 @@ class Timing:
     # planned reversing speed as a share of the forward speed (an arc driven backwards takes
     # 1 / reverse_ratio as many steps); 0: it never reverses
     reverse_ratio: float = 0.0
+    # a robot that never reverses may still back off its start onto a node nearly behind it, at
+    # this share of the forward speed (0: it may not): a robot parked facing a shelf, or stopped
+    # across a lane where it cannot turn, has no other way out
+    start_back_ratio: float = 0.0
+    soft_waiting: bool = True  # the guide passes by where robots not planned yet stand (schedule.py)
     shelters: bool = False  # a robot in another's way may be sent to a shelter first (schedule.py)
     unseen_limit: float = 1.0  # arcs more than this share unseen driven that way are not driven
 

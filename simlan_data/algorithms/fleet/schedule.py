@@ -108,6 +108,16 @@ class Reservations:
             self._merged[step] = fp.region(*parts)
         return self._merged[step]
 
+    def waiting_nodes(self, radius_m: float) -> NDArray[np.bool_]:
+        """Nodes where a disc of ``radius_m`` conflicts with where a robot not planned yet stands."""
+        regions = [region for region, _, _ in self.waiting.values()]
+        if not regions:
+            return np.zeros(self.graph.size, dtype=bool)
+        p, q, rad = fp.region(*regions)
+        xy = self.graph.xy
+        d = fp.segment_distances(xy, xy, p, q)
+        return np.asarray((d < radius_m + rad[None, :] + self.safety_m).any(axis=1), dtype=bool)
+
     def blocked_nodes(self, step: int | None, radius_m: float) -> NDArray[np.bool_]:
         """Nodes where a disc of ``radius_m`` conflicts with what is held at ``step`` (None: with
         what stays after the horizon)."""
@@ -324,13 +334,17 @@ def _plan_one(
     # the search's guide: route lengths that avoid what stays held to the horizon (robots parked,
     # obstacles), so a detour round a lane that stays blocked is found without searching the lane
     staying = table.blocked_nodes(None, r.shape.half_width_m)
+    # ... and passes by where the robots not planned yet stand, where it can: a way through them
+    # leaves them no room to get out of it (a forklift standing across the corridor and a pallet
+    # truck facing it, each planned straight through the other: both blocked for good)
+    others = table.waiting_nodes(r.shape.half_width_m) if timing.soft_waiting else None
     goal = r.goal
 
     def guide(forward: bool) -> ToGoal:
-        to = search.to_goal(goal, avoid=staying, forward=forward)
+        to = search.to_goal(goal, avoid=staying, forward=forward, soft=others)
         if search.start_h(to) < PENALTY_M / timing.spacing_m:
             return to
-        return search.to_goal(goal, forward=forward)  # every way passes something that stays
+        return search.to_goal(goal, forward=forward, soft=others)  # every way passes something that stays
 
     to = guide(forward=False)
     if not table.blocked_nodes(timing.horizon, r.shape.half_width_m)[r.goal]:  # free at the horizon

@@ -45,6 +45,7 @@ START = -1  # ``prev`` of the start state: the robot stands at its real pose
 FROM_START = -2  # ``prev`` of the first vertex after it: the edge starts at the real pose
 SNAP_M = 0.5  # the robot keeps its heading driving onto its own start node closer than this
 PENALTY_M = 1000.0  # the search's guide avoids nodes held to the horizon at this extra cost
+SOFT_M = 3.0  # ... and passes by where robots not planned yet stand at this extra cost per arc
 MAX_EXPANSIONS = 40_000  # a search that expands more states than this gives up (reported blocked)
 QUEUE_EXPANSIONS = 4_000  # the same for a search to a queue node (near; up to 12 are tried)
 
@@ -71,6 +72,7 @@ class Search:
         self._held: tuple | None = None
         self._ever_bad: list[bool] = []
         self._always = [(1, timing.horizon)]
+        self._pivots: dict[float, bool] = {}  # arc angle off the start -> whether it may pivot to it
         self.target = -1
         self.reversing = timing.reverse_ratio > 0.0  # it may drive an arc backwards
         # per arc: reversing along it keeps the robot's tail, which leads, off the shelves (the
@@ -149,10 +151,18 @@ class Search:
         return fp.conflict((c, c.copy(), np.array([self.r.shape.half_width_m])), held, self.timing.safety_m)
 
     # ------------------------------------------------------------------ search
-    def to_goal(self, goal: int, avoid: NDArray[np.bool_] | None = None, *, forward: bool = False) -> ToGoal:
+    def to_goal(
+        self,
+        goal: int,
+        avoid: NDArray[np.bool_] | None = None,
+        *,
+        forward: bool = False,
+        soft: NDArray[np.bool_] | None = None,
+    ) -> ToGoal:
         """Route lengths to ``goal``; ``forward``: for a robot that cannot reverse and turns only where
-        it may (``turns.py``); ``avoid``: nodes to keep off."""
-        return self.turns.to_goal(goal, avoid, PENALTY_M, forward=forward)
+        it may (``turns.py``); ``avoid``: nodes to keep off; ``soft``: nodes to pass by where it can
+        (where robots not planned yet stand: ``SOFT_M`` more per arc touching one)."""
+        return self.turns.to_goal(goal, avoid, PENALTY_M, forward=forward, soft=soft, soft_m=SOFT_M)
 
     def start_h(self, to: ToGoal) -> float:
         """The guide's steps to the goal from where the robot stands (the better of its two starts)."""
@@ -167,12 +177,12 @@ class Search:
         if turn or to.plain:
             return to.node[r.start] / self.timing.spacing_m
         best = math.inf
+        backs = self.reversing or self.timing.start_back_ratio > 0.0
         for v, length, angle in self._arcs(r.start, START):
-            if r.heading_rad is not None and length > 1e-9 and not self.turns.within(r.heading_rad, angle):
-                if (
-                    self.reversing
-                    and angle_off(r.heading_rad, angle + math.pi) <= self.timing.cusp_tolerance_rad
-                ):
+            heading = r.heading_rad
+            off = heading is not None and length > 1e-9 and not self.turns.within(heading, angle)
+            if heading is not None and (off or (length > 1e-9 and not self._may_pivot(START, angle))):
+                if backs and angle_off(heading, angle + math.pi) <= self.timing.cusp_tolerance_rad:
                     best = min(best, length + to.facing(v, angle + math.pi))
                 continue
             rest = to.facing(v, angle) if v == r.start else to.arc[self.graph.arc_index[(r.start, v)]]
@@ -285,20 +295,22 @@ class Search:
         # a change of direction (a cusp; leaving the start backwards) only nearly in line
         turn_tol, cusp_tol = self.timing.turn_tolerance_rad, self.timing.cusp_tolerance_rad
         ahead_tol, back_tol = (cusp_tol, turn_tol) if back else (turn_tol, cusp_tol)
+        backs = self.reversing or (prev == START and self.timing.start_back_ratio > 0.0)
         out = []
         blind = self.blind
         for v, length, angle in self._arcs(u, prev):
             ways = []  # (reversing, steps)
             if free or length <= 1e-9 or angle_off(cast(float, heading), angle) <= ahead_tol:
-                if not (blind and self._blind(u, v, prev, back=False)):
+                if not (blind and self._blind(u, v, prev, back=False)) and self._may_pivot(prev, angle):
                     ways.append((False, steps(length)))
             elif (
-                self.reversing
+                backs
                 and angle_off(cast(float, heading), angle + math.pi) <= back_tol
                 and self._may_back(u, v, prev)
                 and not (blind and self._blind(u, v, prev, back=True))
             ):
-                ways.append((True, steps(length / self.timing.reverse_ratio)))
+                ratio = self.timing.reverse_ratio if self.reversing else self.timing.start_back_ratio
+                ways.append((True, steps(length / ratio)))
             for back2, s in ways:
                 for turn2 in (False, True) if turnable[v] else (False,):
                     place2 = (v, came, turn2, back2)
@@ -324,6 +336,21 @@ class Search:
         if prev == START or u == v or v == self.target:
             return False
         return self.blind[self.graph.arc_index[(v, u) if back else (u, v)]]
+
+    def _may_pivot(self, prev: int, angle: float) -> bool:
+        """Whether a robot leaving its start pose (``prev`` START) on an arc at ``angle`` may: more
+        than nearly in line it pivots as it starts, so only where its outline turns that far clear of
+        the floor's obstacles (a forklift parked beside a shelf swung its tail into it leaving on an
+        arc 52 degrees off its heading). Later vertices: True (their turns keep to the lanes)."""
+        heading = self.r.heading_rad
+        if prev != START or heading is None or self.r.start_turnable:
+            return True
+        if angle_off(heading, angle) <= self.timing.cusp_tolerance_rad:
+            return True
+        key = round(angle, 6)
+        if key not in self._pivots:
+            self._pivots[key] = self.graph.pivot_clear(self.start_xy, self.r.shape, heading, angle)
+        return self._pivots[key]
 
     def _may_back(self, u: int, v: int, prev: int) -> bool:
         """Whether reversing from ``u`` (from the start pose where ``prev`` is START) to ``v``

@@ -55,7 +55,7 @@ class TurnGraph:
                     src.append(a)
                     dst.append(b)
         self.moves = (np.asarray(src, dtype=np.int64), np.asarray(dst, dtype=np.int64))
-        self._cache: dict[tuple[int, bytes | None, float, bool], ToGoal] = {}  # replans ask the same again
+        self._cache: dict[tuple, ToGoal] = {}  # replans ask the same again
 
     def within(self, heading: float, angle: float) -> bool:
         return angle_off(heading, angle) <= self.tolerance_rad
@@ -67,15 +67,21 @@ class TurnGraph:
         penalty_m: float = 0.0,
         *,
         forward: bool = True,
+        soft: NDArray[np.bool_] | None = None,
+        soft_m: float = 0.0,
     ) -> ToGoal:
         """Length still to drive to ``goal`` from every arc and node; with ``avoid``, every arc
-        touching an avoided node costs ``penalty_m`` more."""
+        touching an avoided node costs ``penalty_m`` more, and with ``soft`` every arc touching one
+        of those nodes ``soft_m`` more."""
         avoided = avoid is not None and bool(avoid.any())
+        softened = soft is not None and soft_m > 0.0 and bool(soft.any())
         key = (
             goal,
             np.packbits(avoid).tobytes() if avoid is not None and avoided else None,
             penalty_m,
             forward,
+            np.packbits(soft).tobytes() if soft is not None and softened else None,
+            soft_m,
         )
         if key not in self._cache:
             if len(self._cache) >= CACHED:
@@ -83,6 +89,8 @@ class TurnGraph:
             cost = self.lengths_m
             if avoid is not None and avoided:
                 cost = cost + penalty_m * (avoid[self.arcs[:, 0]] | avoid[self.arcs[:, 1]])
+            if soft is not None and softened:
+                cost = cost + soft_m * (soft[self.arcs[:, 0]] | soft[self.arcs[:, 1]])
             self._cache[key] = self._forward(goal, cost) if forward else self._plain(goal, cost)
         return self._cache[key]
 
