@@ -33,6 +33,7 @@ from scipy.spatial import cKDTree
 from simlan_data.algorithms.fleet.footprint import Shape
 from simlan_data.algorithms.fleet.turns import TurnGraph
 from simlan_data.algorithms.occupancy import OccupancyGrid
+from simlan_data.geometry.rotations import wrap_angle
 
 _NEIGHBOURS = ((0, 1), (1, -1), (1, 0), (1, 1))  # half of the 8-neighbourhood: each pair once
 
@@ -203,7 +204,7 @@ class RouteGraph:
         outline crossing an obstacle of the floor (sampled every 0.05 rad; True without a grid)."""
         if self.grid is None:
             return True
-        turn = (to_rad - from_rad + np.pi) % (2 * np.pi) - np.pi
+        turn = float(wrap_angle(to_rad - from_rad))
         yaws = from_rad + np.linspace(0.0, turn, max(2, int(np.ceil(abs(turn) / 0.05)) + 1))
         half = shape.half_width_m - shape.tolerance_m
         corners = np.array(

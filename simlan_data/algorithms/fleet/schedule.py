@@ -111,18 +111,16 @@ class Reservations:
     def waiting_nodes(self, radius_m: float) -> NDArray[np.bool_]:
         """Nodes where a disc of ``radius_m`` conflicts with where a robot not planned yet stands."""
         regions = [region for region, _, _ in self.waiting.values()]
-        if not regions:
-            return np.zeros(self.graph.size, dtype=bool)
-        p, q, rad = fp.region(*regions)
-        xy = self.graph.xy
-        d = fp.segment_distances(xy, xy, p, q)
-        return np.asarray((d < radius_m + rad[None, :] + self.safety_m).any(axis=1), dtype=bool)
+        return self._nodes_near(fp.region(*regions) if regions else None, radius_m)
 
     def blocked_nodes(self, step: int | None, radius_m: float) -> NDArray[np.bool_]:
         """Nodes where a disc of ``radius_m`` conflicts with what is held at ``step`` (None: with
         what stays after the horizon)."""
         staying = fp.region(*self.staying) if step is None and self.staying else None
-        held = staying if step is None else self.at(step)
+        return self._nodes_near(staying if step is None else self.at(step), radius_m)
+
+    def _nodes_near(self, held: Region | None, radius_m: float) -> NDArray[np.bool_]:
+        """Nodes where a disc of ``radius_m`` conflicts with ``held`` (none when it is None)."""
         if held is None:
             return np.zeros(self.graph.size, dtype=bool)
         xy = self.graph.xy

@@ -180,8 +180,11 @@ class Search:
         backs = self.reversing or self.timing.start_back_ratio > 0.0
         for v, length, angle in self._arcs(r.start, START):
             heading = r.heading_rad
-            off = heading is not None and length > 1e-9 and not self.turns.within(heading, angle)
-            if heading is not None and (off or (length > 1e-9 and not self._may_pivot(START, angle))):
+            if (
+                heading is not None
+                and length > 1e-9
+                and (not self.turns.within(heading, angle) or not self._may_pivot(START, angle))
+            ):
                 if backs and angle_off(heading, angle + math.pi) <= self.timing.cusp_tolerance_rad:
                     best = min(best, length + to.facing(v, angle + math.pi))
                 continue
@@ -296,12 +299,15 @@ class Search:
         turn_tol, cusp_tol = self.timing.turn_tolerance_rad, self.timing.cusp_tolerance_rad
         ahead_tol, back_tol = (cusp_tol, turn_tol) if back else (turn_tol, cusp_tol)
         backs = self.reversing or (prev == START and self.timing.start_back_ratio > 0.0)
+        pivots = prev == START  # leaving the start pose forwards may need a pivot (_may_pivot)
         out = []
         blind = self.blind
         for v, length, angle in self._arcs(u, prev):
             ways = []  # (reversing, steps)
             if free or length <= 1e-9 or angle_off(cast(float, heading), angle) <= ahead_tol:
-                if not (blind and self._blind(u, v, prev, back=False)) and self._may_pivot(prev, angle):
+                if not (blind and self._blind(u, v, prev, back=False)) and (
+                    not pivots or self._may_pivot(START, angle)
+                ):
                     ways.append((False, steps(length)))
             elif (
                 backs
@@ -341,7 +347,8 @@ class Search:
         """Whether a robot leaving its start pose (``prev`` START) on an arc at ``angle`` may: more
         than nearly in line it pivots as it starts, so only where its outline turns that far clear of
         the floor's obstacles (a forklift parked beside a shelf swung its tail into it leaving on an
-        arc 52 degrees off its heading). Later vertices: True (their turns keep to the lanes)."""
+        arc 52 degrees off its heading). Later vertices: True (their turns keep to the lanes; the
+        search's hot loop asks only for the start)."""
         heading = self.r.heading_rad
         if prev != START or heading is None or self.r.start_turnable:
             return True
