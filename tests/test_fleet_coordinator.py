@@ -558,6 +558,8 @@ def test_an_idle_robot_that_cannot_plan_where_it_creeps_does_not_replan_every_ti
 def test_config_rejects_a_bad_value_naming_the_key() -> None:
     with pytest.raises(ConfigError, match=r"algorithms\.coordinator\.spacing_m"):
         FleetConfig(spacing_m=0.0)
+    with pytest.raises(ConfigError, match=r"algorithms\.coordinator\.start_back_ratio"):
+        FleetConfig(start_back_ratio=2.0)
 
 
 def test_fleet_coordinator_needs_the_grid() -> None:
